@@ -1,0 +1,327 @@
+"""The 15-parameter camera of paper section III, its OpenCV form, and pixel <-> floor mapping.
+
+Genome order: [f_u, f_v, c_u, c_v, t_x, t_y, t_z, alpha, beta, gamma, k1, k2, p1, p2, k3], with
+R = Rz(gamma) Ry(beta) Rx(alpha). The genome is a search parametrisation expressed in the paper's
+frame: origin at the centre of the (WSF singles) back wall's floor line, x across (to the right),
+y down, z towards the front wall; t is that origin in camera coordinates. This is the frame Tables 1
+and 3 are sized for. Every other input and output uses the court frame (see `court.py`); the one
+rigid transform between the two lives here (`PAPER_FROM_COURT_R`, `PAPER_ORIGIN_COURT_M`).
+
+Distortion is Brown's model exactly as OpenCV applies it (k1, k2, p1, p2, k3; no thin prism or
+rational terms), so `cv2.projectPoints` with `to_opencv()` reproduces `project_points`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import cv2
+import numba
+import numpy as np
+
+GENOME_NAMES: tuple[str, ...] = (
+    "f_u",
+    "f_v",
+    "c_u",
+    "c_v",
+    "t_x",
+    "t_y",
+    "t_z",
+    "alpha",
+    "beta",
+    "gamma",
+    "k1",
+    "k2",
+    "p1",
+    "p2",
+    "k3",
+)
+N_GENES = len(GENOME_NAMES)
+GENE = {name: i for i, name in enumerate(GENOME_NAMES)}
+INTRINSIC_GENES = slice(0, 4)
+DISTORTION_GENES = slice(10, 15)
+
+# x_paper = PAPER_FROM_COURT_R @ (x_court - PAPER_ORIGIN_COURT_M): x stays, y_paper = z_court (down),
+# z_paper = -y_court (towards the front wall). A proper rotation (det = +1).
+PAPER_FROM_COURT_R = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+PAPER_ORIGIN_COURT_M = np.array([3.2, 9.75, 0.0])
+
+# Pixel -> floor outcomes (`pixel_to_floor` status codes).
+RAY_OK = 0
+RAY_UNDISTORT_FAILED = 1  # pixel outside the region where the lens model is invertible
+RAY_MISSES_FLOOR = 2  # ray parallel to the floor or meeting it behind the camera
+
+
+def as_population(genomes: np.ndarray) -> np.ndarray:
+    """(15,) or (N, 15) -> (N, 15) float64, checked."""
+    pop = np.asarray(genomes, dtype=np.float64)
+    if pop.ndim == 1:
+        pop = pop[None, :]
+    if pop.ndim != 2 or pop.shape[1] != N_GENES:
+        raise ValueError(f"genomes must have shape (15,) or (N, 15), got {np.shape(genomes)}")
+    return pop
+
+
+def rotation_matrices(alpha: np.ndarray, beta: np.ndarray, gamma: np.ndarray) -> np.ndarray:
+    """R = Rz(gamma) Ry(beta) Rx(alpha) for arrays of angles (...,) -> (..., 3, 3)."""
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    cb, sb = np.cos(beta), np.sin(beta)
+    cg, sg = np.cos(gamma), np.sin(gamma)
+    r = np.empty(np.shape(alpha) + (3, 3))
+    r[..., 0, 0] = cg * cb
+    r[..., 0, 1] = cg * sb * sa - sg * ca
+    r[..., 0, 2] = cg * sb * ca + sg * sa
+    r[..., 1, 0] = sg * cb
+    r[..., 1, 1] = sg * sb * sa + cg * ca
+    r[..., 1, 2] = sg * sb * ca - cg * sa
+    r[..., 2, 0] = -sb
+    r[..., 2, 1] = cb * sa
+    r[..., 2, 2] = cb * ca
+    return r
+
+
+def angles_from_rotation(r: np.ndarray) -> tuple[float, float, float]:
+    """Inverse of `rotation_matrices` for one matrix: (alpha, beta, gamma), beta in [-pi/2, pi/2]."""
+    beta = float(np.arcsin(np.clip(-r[2, 0], -1.0, 1.0)))
+    alpha = float(np.arctan2(r[2, 1], r[2, 2]))
+    gamma = float(np.arctan2(r[1, 0], r[0, 0]))
+    return alpha, beta, gamma
+
+
+def court_extrinsics(genomes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World(court)-to-camera rotation (N, 3, 3) and translation (N, 3): X_cam = R X_court + t."""
+    pop = as_population(genomes)
+    r_paper = rotation_matrices(pop[:, 7], pop[:, 8], pop[:, 9])
+    r_court = r_paper @ PAPER_FROM_COURT_R
+    t_court = pop[:, 4:7] - r_court @ PAPER_ORIGIN_COURT_M
+    return r_court, t_court
+
+
+@numba.njit(cache=True, inline="always")
+def project_point_njit(
+    r: np.ndarray, t: np.ndarray, g: np.ndarray, x: float, y: float, z: float
+) -> tuple[float, float, float]:
+    """One court point through one camera: (u, v, depth). The single projection kernel.
+
+    `r`, `t` from `court_extrinsics`, `g` the genome (intrinsics and distortion are read from it).
+    Mirrors OpenCV's projectPoints for k1, k2, p1, p2, k3. Depth <= 0 means behind the camera; the
+    pixel is then meaningless and callers must treat it as not visible.
+    """
+    xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
+    yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
+    zc = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + t[2]
+    inv_z = 1.0 / zc if zc != 0.0 else 1.0
+    xn = xc * inv_z
+    yn = yc * inv_z
+    r2 = xn * xn + yn * yn
+    r4 = r2 * r2
+    radial = 1.0 + g[10] * r2 + g[11] * r4 + g[14] * r4 * r2
+    a1 = 2.0 * xn * yn
+    xd = xn * radial + g[12] * a1 + g[13] * (r2 + 2.0 * xn * xn)
+    yd = yn * radial + g[12] * (r2 + 2.0 * yn * yn) + g[13] * a1
+    return g[0] * xd + g[2], g[1] * yd + g[3], zc
+
+
+@numba.njit(cache=True)
+def _project_all(
+    r: np.ndarray, t: np.ndarray, pop: np.ndarray, points: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    n, m = pop.shape[0], points.shape[0]
+    pixels = np.empty((n, m, 2))
+    depth = np.empty((n, m))
+    for i in range(n):
+        for j in range(m):
+            u, v, zc = project_point_njit(
+                r[i], t[i], pop[i], points[j, 0], points[j, 1], points[j, 2]
+            )
+            pixels[i, j, 0] = u
+            pixels[i, j, 1] = v
+            depth[i, j] = zc
+    return pixels, depth
+
+
+def project_points(genomes: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Project court points (M, 3) through one genome (15,) or a population (N, 15).
+
+    Returns pixels (M, 2) / (N, M, 2) and camera depth (M,) / (N, M). Points with depth <= 0 are
+    behind the camera.
+    """
+    single = np.ndim(genomes) == 1
+    pop = as_population(genomes)
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must have shape (M, 3), got {np.shape(points)}")
+    r, t = court_extrinsics(pop)
+    pixels, depth = _project_all(r, t, pop, pts)
+    return (pixels[0], depth[0]) if single else (pixels, depth)
+
+
+def project_visible(genome: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Pixels (M, 2) of court points through one camera, NaN for points behind it."""
+    pixels, depth = project_points(genome, points)
+    pixels = pixels.copy()
+    pixels[depth <= 0] = np.nan
+    return pixels
+
+
+def _distort_normalized(
+    x: np.ndarray, y: np.ndarray, d: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Distorted normalised coordinates and the Jacobian (4, ...) of the map, for Newton steps."""
+    k1, k2, p1, p2, k3 = d
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    dradial_dr2 = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    dxd_dx = radial + 2.0 * x * x * dradial_dr2 + 2.0 * p1 * y + 6.0 * p2 * x
+    dxd_dy = 2.0 * x * y * dradial_dr2 + 2.0 * p1 * x + 2.0 * p2 * y
+    dyd_dx = 2.0 * x * y * dradial_dr2 + 2.0 * p1 * x + 2.0 * p2 * y
+    dyd_dy = radial + 2.0 * y * y * dradial_dr2 + 6.0 * p1 * y + 2.0 * p2 * x
+    return xd, yd, np.stack([dxd_dx, dxd_dy, dyd_dx, dyd_dy])
+
+
+def undistort_normalized(
+    xd: np.ndarray, yd: np.ndarray, dist: np.ndarray, iterations: int = 30
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Invert the distortion by Newton's method: (x, y, ok) for distorted normalised (xd, yd).
+
+    `ok` is False where Newton did not converge or converged onto the folded part of the lens
+    model (Jacobian determinant <= 0), i.e. where no physical undistorted point exists.
+    """
+    x, y = xd.copy(), yd.copy()
+    for _ in range(iterations):
+        fx, fy, jac = _distort_normalized(x, y, dist)
+        rx, ry = fx - xd, fy - yd
+        det = jac[0] * jac[3] - jac[1] * jac[2]
+        safe = np.where(np.abs(det) > 1e-12, det, 1e-12)
+        x = x - (jac[3] * rx - jac[1] * ry) / safe
+        y = y - (-jac[2] * rx + jac[0] * ry) / safe
+    fx, fy, jac = _distort_normalized(x, y, dist)
+    det = jac[0] * jac[3] - jac[1] * jac[2]
+    residual = np.hypot(fx - xd, fy - yd)
+    ok = np.isfinite(x) & np.isfinite(y) & (residual < 1e-10) & (det > 0)
+    return x, y, ok
+
+
+def pixel_to_floor(
+    genome: np.ndarray, pixels: np.ndarray, plane_z_m: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (M, 2) -> court (x, y) metres (M, 2) on the plane z = plane_z_m, and status (M,).
+
+    Undistorts, casts the ray from the camera centre and intersects it with the plane. Status is
+    RAY_OK, RAY_UNDISTORT_FAILED or RAY_MISSES_FLOOR; points are NaN where status != RAY_OK.
+    """
+    g = as_population(genome)[0]
+    px = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    xd = (px[:, 0] - g[2]) / g[0]
+    yd = (px[:, 1] - g[3]) / g[1]
+    with np.errstate(all="ignore"):
+        x, y, ok = undistort_normalized(xd, yd, g[DISTORTION_GENES])
+        r, t = court_extrinsics(g)
+        r, t = r[0], t[0]
+        centre = -r.T @ t
+        rays = np.stack([x, y, np.ones_like(x)], axis=1) @ r  # rows: R^T d
+        s = (plane_z_m - centre[2]) / rays[:, 2]
+        hits = centre[None, :] + s[:, None] * rays
+    status = np.full(px.shape[0], RAY_OK, dtype=np.int8)
+    status[~ok] = RAY_UNDISTORT_FAILED
+    misses = ok & ~(np.isfinite(s) & (s > 0))
+    status[misses] = RAY_MISSES_FLOOR
+    out = hits[:, :2].copy()
+    out[status != RAY_OK] = np.nan
+    return out, status
+
+
+def floor_to_pixel(
+    genome: np.ndarray, floor_xy_m: np.ndarray, plane_z_m: float = 0.0
+) -> np.ndarray:
+    """Court floor (x, y) metres (M, 2) -> pixels (M, 2); NaN where the point is behind the camera."""
+    xy = np.asarray(floor_xy_m, dtype=np.float64).reshape(-1, 2)
+    points = np.column_stack([xy, np.full(len(xy), plane_z_m)])
+    return project_visible(genome, points)
+
+
+def to_opencv(genome: np.ndarray, image_size: tuple[int, int] | None = None) -> dict[str, Any]:
+    """The OpenCV JSON form of the design brief, in the court frame."""
+    g = as_population(genome)[0]
+    r, t = court_extrinsics(g)
+    rvec, _ = cv2.Rodrigues(r[0])
+    out: dict[str, Any] = {
+        "K": [[float(g[0]), 0.0, float(g[2])], [0.0, float(g[1]), float(g[3])], [0.0, 0.0, 1.0]],
+        "dist": [float(v) for v in (g[10], g[11], g[12], g[13], g[14])],
+        "rvec": [float(v) for v in rvec.ravel()],
+        "tvec": [float(v) for v in t[0]],
+    }
+    if image_size is not None:
+        out["image_size"] = [int(image_size[0]), int(image_size[1])]
+    return out
+
+
+def _float_array(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be numbers with shape {list(shape)}") from None
+    if arr.shape != shape:
+        raise ValueError(f"{what} must have shape {list(shape)}, got {list(arr.shape)}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{what} must be finite numbers")
+    return arr
+
+
+def from_opencv(camera: Mapping[str, Any]) -> np.ndarray:
+    """Genome from the OpenCV form (K, dist, rvec, tvec in the court frame)."""
+    for key in ("K", "dist", "rvec", "tvec"):
+        if key not in camera:
+            raise ValueError(f"camera is missing {key!r} (expected K, dist, rvec, tvec)")
+    k = _float_array(camera["K"], (3, 3), "K")
+    if k[0, 1] != 0 or k[1, 0] != 0 or k[2, 0] != 0 or k[2, 1] != 0 or k[2, 2] != 1:
+        raise ValueError("K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)")
+    if k[0, 0] <= 0 or k[1, 1] <= 0:
+        raise ValueError("K focal lengths fx, fy must be positive")
+    dist = np.asarray(camera["dist"], dtype=np.float64).ravel() if camera["dist"] is not None else []
+    if len(dist) not in (4, 5, 8, 12, 14):
+        raise ValueError("dist must hold k1, k2, p1, p2[, k3]")
+    if len(dist) > 5 and np.any(np.asarray(dist[5:]) != 0):
+        raise ValueError("only k1, k2, p1, p2, k3 distortion is supported; higher terms must be 0")
+    dist5 = _float_array(np.pad(dist[:5], (0, 5 - min(len(dist), 5))), (5,), "dist")
+    rvec = _float_array(camera["rvec"], (3,), "rvec")
+    tvec = _float_array(camera["tvec"], (3,), "tvec")
+    r_court, _ = cv2.Rodrigues(rvec)
+    r_paper = r_court @ PAPER_FROM_COURT_R.T
+    alpha, beta, gamma = angles_from_rotation(r_paper)
+    t_paper = tvec + r_court @ PAPER_ORIGIN_COURT_M
+    k1, k2, p1, p2, k3 = dist5
+    return np.array(
+        [k[0, 0], k[1, 1], k[0, 2], k[1, 2], *t_paper, alpha, beta, gamma, k1, k2, p1, p2, k3]
+    )
+
+
+def parse_image_size(value: Any) -> tuple[int, int]:
+    size = _float_array(value, (2,), "image_size")
+    if np.any(size < 1) or np.any(size != np.round(size)):
+        raise ValueError("image_size must be two positive whole numbers [width, height]")
+    return int(size[0]), int(size[1])
+
+
+def camera_from_json(obj: Any) -> tuple[np.ndarray, tuple[int, int] | None]:
+    """Accept a genome (list of 15), {"genome": [...]} or the OpenCV form; -> (genome, image_size).
+
+    Raises ValueError with a message meant for an API user.
+    """
+    if isinstance(obj, Mapping) and "opencv" in obj and isinstance(obj["opencv"], Mapping):
+        obj = obj["opencv"]  # a whole calibration result is accepted too
+    if isinstance(obj, Mapping) and "K" in obj:
+        size = parse_image_size(obj["image_size"]) if obj.get("image_size") is not None else None
+        return from_opencv(obj), size
+    if isinstance(obj, Mapping) and "genome" in obj:
+        size = parse_image_size(obj["image_size"]) if obj.get("image_size") is not None else None
+        return _float_array(obj["genome"], (N_GENES,), "genome"), size
+    if isinstance(obj, list | tuple):
+        return _float_array(obj, (N_GENES,), "genome"), None
+    raise ValueError(
+        "a camera must be a genome (15 numbers), {\"genome\": [...]} or the OpenCV form "
+        "{\"K\", \"dist\", \"rvec\", \"tvec\", \"image_size\"}"
+    )
