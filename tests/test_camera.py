@@ -11,7 +11,9 @@ def random_cameras(rng: np.random.Generator, n: int, base: np.ndarray) -> np.nda
     pop[:, 2:4] += rng.uniform(-60, 60, (n, 2))
     pop[:, 4:7] += rng.uniform(-1.0, 1.0, (n, 3))
     pop[:, 7:10] += rng.uniform(-0.1, 0.1, (n, 3))
-    pop[:, 10:15] = rng.uniform([-0.3, -0.1, -0.01, -0.01, -0.2], [0.1, 0.1, 0.01, 0.01, 0.2], (n, 5))
+    pop[:, 10:15] = rng.uniform(
+        [-0.3, -0.1, -0.01, -0.01, -0.2], [0.1, 0.1, 0.01, 0.01, 0.2], (n, 5)
+    )
     return pop
 
 
@@ -25,7 +27,10 @@ def test_projection_matches_opencv_to_a_micro_pixel(target_genome):
     for g, px, d in zip(pop, pixels, depth, strict=True):
         cv = camera.to_opencv(g, (1920, 1080))
         ref, _ = cv2.projectPoints(
-            points, np.array(cv["rvec"]), np.array(cv["tvec"]), np.array(cv["K"]),
+            points,
+            np.array(cv["rvec"]),
+            np.array(cv["tvec"]),
+            np.array(cv["K"]),
             np.array(cv["dist"]),
         )
         front = d > 0
@@ -101,10 +106,17 @@ def test_camera_json_errors_are_clear():
     with pytest.raises(ValueError, match="shape"):
         camera.camera_from_json([1.0, 2.0])
     with pytest.raises(ValueError, match="missing 'tvec'"):
-        camera.camera_from_json({"K": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "dist": [0] * 5, "rvec": [0] * 3})
+        camera.camera_from_json(
+            {"K": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "dist": [0] * 5, "rvec": [0] * 3}
+        )
     with pytest.raises(ValueError, match="finite"):
         camera.camera_from_json([float("nan")] * 15)
     with pytest.raises(ValueError, match="skew"):
         camera.from_opencv(
-            {"K": [[1, 0.5, 0], [0, 1, 0], [0, 0, 1]], "dist": [0] * 5, "rvec": [0] * 3, "tvec": [0] * 3}
+            {
+                "K": [[1, 0.5, 0], [0, 1, 0], [0, 0, 1]],
+                "dist": [0] * 5,
+                "rvec": [0] * 3,
+                "tvec": [0] * 3,
+            }
         )

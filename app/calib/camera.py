@@ -281,7 +281,9 @@ def from_opencv(camera: Mapping[str, Any]) -> np.ndarray:
         raise ValueError("K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)")
     if k[0, 0] <= 0 or k[1, 1] <= 0:
         raise ValueError("K focal lengths fx, fy must be positive")
-    dist = np.asarray(camera["dist"], dtype=np.float64).ravel() if camera["dist"] is not None else []
+    dist = (
+        np.asarray(camera["dist"], dtype=np.float64).ravel() if camera["dist"] is not None else []
+    )
     if len(dist) not in (4, 5, 8, 12, 14):
         raise ValueError("dist must hold k1, k2, p1, p2[, k3]")
     if len(dist) > 5 and np.any(np.asarray(dist[5:]) != 0):
@@ -322,6 +324,6 @@ def camera_from_json(obj: Any) -> tuple[np.ndarray, tuple[int, int] | None]:
     if isinstance(obj, list | tuple):
         return _float_array(obj, (N_GENES,), "genome"), None
     raise ValueError(
-        "a camera must be a genome (15 numbers), {\"genome\": [...]} or the OpenCV form "
-        "{\"K\", \"dist\", \"rvec\", \"tvec\", \"image_size\"}"
+        'a camera must be a genome (15 numbers), {"genome": [...]} or the OpenCV form '
+        '{"K", "dist", "rvec", "tvec", "image_size"}'
     )

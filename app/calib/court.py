@@ -37,7 +37,9 @@ class CourtSpec:
 
 COURT_SPECS: dict[str, CourtSpec] = {
     "wsf": CourtSpec("wsf", description="WSF singles court"),
-    "psa": CourtSpec("psa", tin_upper_m=0.43, description="WSF singles court with the PSA 0.43 m tin"),
+    "psa": CourtSpec(
+        "psa", tin_upper_m=0.43, description="WSF singles court with the PSA 0.43 m tin"
+    ),
     "doubles": CourtSpec("doubles", width_m=7.62, description="WSF doubles court (7.62 m wide)"),
 }
 
