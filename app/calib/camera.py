@@ -286,7 +286,7 @@ def from_opencv(camera: Mapping[str, Any]) -> np.ndarray:
     )
     if len(dist) not in (4, 5, 8, 12, 14):
         raise ValueError("dist must hold k1, k2, p1, p2[, k3]")
-    if len(dist) > 5 and np.any(np.asarray(dist[5:]) != 0):
+    if len(dist) > 5 and np.any(dist[5:] != 0):
         raise ValueError("only k1, k2, p1, p2, k3 distortion is supported; higher terms must be 0")
     dist5 = _float_array(np.pad(dist[:5], (0, 5 - min(len(dist), 5))), (5,), "dist")
     rvec = _float_array(camera["rvec"], (3,), "rvec")
