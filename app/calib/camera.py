@@ -281,9 +281,11 @@ def from_opencv(camera: Mapping[str, Any]) -> np.ndarray:
         raise ValueError("K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)")
     if k[0, 0] <= 0 or k[1, 1] <= 0:
         raise ValueError("K focal lengths fx, fy must be positive")
-    dist = (
-        np.asarray(camera["dist"], dtype=np.float64).ravel() if camera["dist"] is not None else []
-    )
+    raw_dist = camera["dist"] if camera["dist"] is not None else []
+    try:
+        dist = np.asarray(raw_dist, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise ValueError("dist must be numbers k1, k2, p1, p2[, k3]") from None
     if len(dist) not in (4, 5, 8, 12, 14):
         raise ValueError("dist must hold k1, k2, p1, p2[, k3]")
     if len(dist) > 5 and np.any(dist[5:] != 0):
