@@ -48,9 +48,6 @@ class Settings(BaseSettings):
     camera_cache_size: int = Field(default=10_000, ge=1)
     auth_cache_s: float = Field(default=30.0, ge=0)
 
-    # /project
-    max_project_points: int = Field(default=100_000, ge=1)
-
     @model_validator(mode="after")
     def _lease_outlives_progress(self) -> Settings:
         if self.progress_interval_s * 2 >= self.lease_s:

@@ -1,0 +1,146 @@
+"""Calibration uploads (-> queued job) and stored calibrations with their images."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, Request
+from fastapi.responses import FileResponse, JSONResponse
+from starlette.concurrency import run_in_threadpool
+
+from app.api import uploads
+from app.api.deps import SessionDep, StateDep, TenantDep
+from app.api.errors import ApiError
+from app.api.serialize import calibration_out
+from app.db import media, repo
+from app.db.models import Calibration, Court, new_id
+from app.schemas import CalibrationOut, ErrorResponse, JobAccepted
+
+router = APIRouter(tags=["calibrations"])
+
+_UPLOAD_FORM: dict[str, Any] = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "multipart/form-data": {
+                "schema": {
+                    "type": "object",
+                    "required": ["files"],
+                    "properties": {
+                        "files": {
+                            "type": "array",
+                            "items": {"type": "string", "format": "binary"},
+                            "description": "one or more PNG/JPEG images of the same fixed camera,"
+                            " or one MP4/MOV/MKV/AVI/WebM clip (type read from the bytes)",
+                        },
+                        "start_camera": {
+                            "type": "string",
+                            "description": "optional start camera: a genome (15 numbers) or the "
+                            'OpenCV JSON form {"K", "dist", "rvec", "tvec", "image_size"}',
+                        },
+                        "seed": {"type": "integer", "minimum": 0},
+                        "bundle": {"type": "string", "description": "GA operator bundle name"},
+                    },
+                }
+            }
+        },
+    }
+}
+_ERRORS: dict[int | str, dict[str, Any]] = {
+    code: {"model": ErrorResponse} for code in (401, 404, 413, 415, 422)
+}
+
+
+@router.post(
+    "/courts/{court_id}/calibrations",
+    status_code=202,
+    response_model=JobAccepted,
+    openapi_extra=_UPLOAD_FORM,
+    responses=_ERRORS,
+)
+async def upload_calibration(
+    court_id: str, request: Request, state: StateDep, tenant_id: TenantDep
+) -> JSONResponse:
+    """Store the upload, queue a calibration job and answer at once (202 + Location)."""
+    settings = state.settings
+
+    def owned_court() -> Court:
+        with state.sessions() as session:
+            return repo.get_owned(session, Court, tenant_id, court_id)
+
+    await run_in_threadpool(owned_court)  # 404 before reading a byte of the body
+    job_id = new_id()
+    target = media.job_dir(settings, job_id)
+    target.mkdir(parents=True)
+    try:
+        received = await uploads.receive_upload(request, target, settings)
+        summary = await run_in_threadpool(uploads.check_media, target, received.files, settings)
+        params = uploads.parse_job_params(received.fields, summary.image_size)
+        params["image_size"] = list(summary.image_size)
+        await run_in_threadpool(media.fsync_tree, target)
+
+        def commit_job() -> None:
+            with state.sessions.begin() as session:
+                repo.new_job(
+                    session,
+                    job_id=job_id,
+                    tenant_id=tenant_id,
+                    court_id=court_id,
+                    media_kind=summary.kind,
+                    media_files=[f.name for f in received.files],
+                    params=params,
+                    max_attempts=settings.max_attempts,
+                )
+
+        await run_in_threadpool(commit_job)
+    except BaseException:
+        uploads.discard(target)
+        raise
+    return JSONResponse(
+        {"job_id": job_id, "status": "queued"},
+        status_code=202,
+        headers={"Location": f"/jobs/{job_id}"},
+    )
+
+
+@router.get("/calibrations/{calibration_id}", response_model=CalibrationOut)
+def get_calibration(
+    calibration_id: str, session: SessionDep, tenant_id: TenantDep
+) -> CalibrationOut:
+    cal = repo.get_owned(session, Calibration, tenant_id, calibration_id)
+    court = repo.get_owned(session, Court, tenant_id, cal.court_id)
+    return calibration_out(cal, active=court.active_calibration_id == cal.id)
+
+
+def _calibration_image(
+    calibration_id: str, name: str, state: StateDep, session: SessionDep, tenant_id: str
+) -> FileResponse:
+    cal = repo.get_owned(session, Calibration, tenant_id, calibration_id)
+    path = media.calibration_dir(state.settings, cal.id) / name
+    if not path.is_file():
+        raise ApiError(404, "image_missing", f"{name} of calibration {cal.id} is not on disk")
+    return FileResponse(path, media_type="image/png")
+
+
+@router.get(
+    "/calibrations/{calibration_id}/background.png",
+    response_class=FileResponse,
+    responses={200: {"content": {"image/png": {}}}},
+)
+def get_background(
+    calibration_id: str, state: StateDep, session: SessionDep, tenant_id: TenantDep
+) -> FileResponse:
+    """The player-free background the camera was fitted to."""
+    return _calibration_image(calibration_id, "background.png", state, session, tenant_id)
+
+
+@router.get(
+    "/calibrations/{calibration_id}/overlay.png",
+    response_class=FileResponse,
+    responses={200: {"content": {"image/png": {}}}},
+)
+def get_overlay(
+    calibration_id: str, state: StateDep, session: SessionDep, tenant_id: TenantDep
+) -> FileResponse:
+    """The background with the fitted court drawn over it."""
+    return _calibration_image(calibration_id, "overlay.png", state, session, tenant_id)

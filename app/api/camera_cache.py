@@ -1,0 +1,178 @@
+"""In-memory cameras per court, so /project and /image-points do no database work.
+
+Choice: a refresher task polls the database every `camera_refresh_s` with ONE indexed query over all
+cached courts (`SELECT id, active_calibration_id FROM courts WHERE id IN (...)`) and reloads only the
+cameras whose active calibration changed. Requests only read the dict. Why not the alternatives:
+- a per-request version check is a database round trip on the hot path;
+- a TTL alone serves a stale camera for the whole TTL and then makes one unlucky request pay;
+- invalidation messages from the worker need a broker (or PostgreSQL LISTEN, unavailable on SQLite),
+  and cannot reach other API processes on other machines either.
+The price is at most `camera_refresh_s` (default 0.5 s) of staleness after a calibration lands, and
+one small query per interval per API process, independent of request rate. If the refresher is not
+running (e.g. the app was used without its lifespan) entries older than a few intervals are
+revalidated inline, so a request never sees an old camera indefinitely.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from sqlalchemy.orm import Session
+
+from app.calib.court import get_spec
+from app.db import repo
+from app.db.models import Calibration, Court
+
+log = logging.getLogger("squashcal.camera_cache")
+
+REFRESH_QUERY_CHUNK = 500
+STALE_AFTER_INTERVALS = 4
+
+
+@dataclass(frozen=True)
+class CachedCamera:
+    tenant_id: str
+    court_id: str
+    calibration_id: str | None  # None: the court has no calibration yet
+    genome: np.ndarray | None  # (15,)
+    image_size: tuple[int, int] | None
+    court_width_m: float
+    court_length_m: float
+    checked_at: float  # time.monotonic() of the last database check
+
+
+class CameraCache:
+    def __init__(self, sessions: Callable[[], Session], refresh_s: float, max_courts: int) -> None:
+        self._sessions = sessions
+        self.refresh_s = refresh_s
+        self.max_courts = max_courts
+        self._entries: OrderedDict[str, CachedCamera] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, tenant_id: str, court_id: str) -> CachedCamera:
+        """The court's camera entry; loads it on a miss. Raises repo.NotFound for other tenants."""
+        now = time.monotonic()
+        with self._lock:
+            entry = self._entries.get(court_id)
+            if entry is not None:
+                self._entries.move_to_end(court_id)
+        if entry is None or now - entry.checked_at > STALE_AFTER_INTERVALS * self.refresh_s:
+            entry = self._load(tenant_id, court_id)
+        if entry.tenant_id != tenant_id:
+            raise repo.NotFound("court", court_id)
+        return entry
+
+    def _load(self, tenant_id: str, court_id: str) -> CachedCamera:
+        with self._sessions() as session:
+            court = repo.get_owned(session, Court, tenant_id, court_id)
+            entry = self._entry_for(
+                session, court.tenant_id, court.id, court.spec, court.active_calibration_id
+            )
+        self._store(entry)
+        return entry
+
+    @staticmethod
+    def _entry_for(
+        session: Session, tenant_id: str, court_id: str, spec: str, calibration_id: str | None
+    ) -> CachedCamera:
+        court_spec = get_spec(spec)
+        genome = None
+        image_size = None
+        if calibration_id is not None:
+            cal = session.get(Calibration, calibration_id)
+            if cal is not None:
+                genome = np.asarray(cal.genome, dtype=np.float64)
+                genome.setflags(write=False)
+                image_size = (cal.image_width, cal.image_height)
+            else:
+                calibration_id = None
+        return CachedCamera(
+            tenant_id=tenant_id,
+            court_id=court_id,
+            calibration_id=calibration_id,
+            genome=genome,
+            image_size=image_size,
+            court_width_m=court_spec.width_m,
+            court_length_m=court_spec.length_m,
+            checked_at=time.monotonic(),
+        )
+
+    def _store(self, entry: CachedCamera) -> None:
+        with self._lock:
+            self._entries[entry.court_id] = entry
+            self._entries.move_to_end(entry.court_id)
+            while len(self._entries) > self.max_courts:
+                self._entries.popitem(last=False)
+
+    def refresh_once(self) -> int:
+        """Check every cached court against the database; returns how many cameras changed."""
+        with self._lock:
+            snapshot = dict(self._entries)
+        if not snapshot:
+            return 0
+        court_ids = list(snapshot)
+        changed = 0
+        checked_at = time.monotonic()
+        with self._sessions() as session:
+            active: dict[str, str | None] = {}
+            for i in range(0, len(court_ids), REFRESH_QUERY_CHUNK):
+                active.update(
+                    repo.active_calibration_ids(session, court_ids[i : i + REFRESH_QUERY_CHUNK])
+                )
+            for court_id, entry in snapshot.items():
+                if court_id not in active:  # court deleted
+                    with self._lock:
+                        self._entries.pop(court_id, None)
+                    continue
+                if active[court_id] != entry.calibration_id:
+                    court = session.get(Court, court_id)
+                    if court is None:
+                        continue
+                    fresh = self._entry_for(
+                        session, court.tenant_id, court.id, court.spec, active[court_id]
+                    )
+                    changed += 1
+                else:
+                    fresh = CachedCamera(**{**entry.__dict__, "checked_at": checked_at})
+                with self._lock:
+                    if court_id in self._entries:  # not evicted meanwhile
+                        self._entries[court_id] = fresh
+        return changed
+
+    async def run_refresher(self) -> None:
+        """Refresh forever (cancel the task to stop). Database errors are logged and retried."""
+        while True:
+            await asyncio.sleep(self.refresh_s)
+            try:
+                changed = await asyncio.to_thread(self.refresh_once)
+                if changed:
+                    log.info("camera cache: %d court camera(s) updated", changed)
+            except Exception:
+                log.exception("camera cache refresh failed; retrying")
+
+
+class AuthCache:
+    """API key hash -> tenant id for `ttl_s` (revocations take effect within that time)."""
+
+    def __init__(self, ttl_s: float) -> None:
+        self.ttl_s = ttl_s
+        self._entries: dict[str, tuple[str, float]] = {}
+
+    def get(self, key_sha256: str) -> str | None:
+        hit = self._entries.get(key_sha256)
+        if hit is None or time.monotonic() > hit[1]:
+            return None
+        return hit[0]
+
+    def put(self, key_sha256: str, tenant_id: str) -> None:
+        if self.ttl_s > 0:
+            if len(self._entries) > 100_000:  # bounded: drop everything rather than grow forever
+                self._entries.clear()
+            self._entries[key_sha256] = (tenant_id, time.monotonic() + self.ttl_s)

@@ -1,0 +1,38 @@
+"""Liveness and readiness."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+from starlette.concurrency import run_in_threadpool
+
+from app.api.deps import StateDep
+from app.api.errors import ApiError
+from app.db.migrate import current_revision
+from app.schemas import Health, Ready
+
+router = APIRouter(tags=["health"])
+
+
+@router.get("/healthz", response_model=Health)
+def healthz() -> Health:
+    """The process is up."""
+    return Health(status="ok")
+
+
+@router.get("/readyz", response_model=Ready)
+async def readyz(state: StateDep) -> Ready:
+    """The database answers and its schema is at the migrations' head."""
+    try:
+        revision = await run_in_threadpool(current_revision, state.engine)
+    except Exception as exc:
+        raise ApiError(
+            503, "database_unreachable", f"database not reachable ({type(exc).__name__})"
+        ) from None
+    if revision != state.head_revision:
+        raise ApiError(
+            503,
+            "migrations_pending",
+            f"database schema is at {revision!r}, code expects {state.head_revision!r}: "
+            "run `squashcal migrate`",
+        )
+    return Ready(status="ready", database=state.engine.dialect.name, revision=revision)

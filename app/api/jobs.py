@@ -1,0 +1,18 @@
+"""Calibration jobs: status, stage, progress, errors."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from app.api.deps import SessionDep, TenantDep
+from app.api.serialize import job_out
+from app.db import repo
+from app.db.models import Job
+from app.schemas import JobOut
+
+router = APIRouter(prefix="/jobs", tags=["jobs"])
+
+
+@router.get("/{job_id}", response_model=JobOut)
+def get_job(job_id: str, session: SessionDep, tenant_id: TenantDep) -> JobOut:
+    return job_out(repo.get_owned(session, Job, tenant_id, job_id))

@@ -1,0 +1,96 @@
+"""Pixels <-> court floor metres through the court's active camera (served from memory)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from fastapi import APIRouter
+from fastapi.responses import Response
+
+from app.api.camera_cache import CachedCamera
+from app.api.deps import StateDep, TenantDep
+from app.api.errors import ApiError
+from app.calib import camera
+from app.schemas import ImagePointsRequest, ImagePointsResponse, ProjectRequest, ProjectResponse
+
+router = APIRouter(tags=["project"])
+
+
+def _calibrated(entry: CachedCamera) -> np.ndarray:
+    if entry.genome is None:
+        raise ApiError(
+            404,
+            "no_calibration",
+            f"court {entry.court_id!r} has no calibration yet: upload frames or a clip first",
+        )
+    return entry.genome
+
+
+def _pairs_or_null(values: np.ndarray) -> list[list[float] | None]:
+    """(M, 2) with NaN rows -> JSON-ready list with None for those rows."""
+    finite = np.isfinite(values).all(axis=1)
+    rows: list[list[float] | None] = values.tolist()
+    for i in np.flatnonzero(~finite):
+        rows[i] = None
+    return rows
+
+
+def _json(payload: dict[str, object]) -> Response:
+    # built by hand: 100 000 points through FastAPI's encoder would cost more than the maths
+    return Response(json.dumps(payload, allow_nan=False), media_type="application/json")
+
+
+def _as_array(pairs: list[tuple[float, float]]) -> np.ndarray:
+    return np.asarray(pairs, dtype=np.float64).reshape(-1, 2)
+
+
+@router.post("/project", response_model=ProjectResponse)
+def project(body: ProjectRequest, state: StateDep, tenant_id: TenantDep) -> Response:
+    """Image pixels -> floor (x, y) metres in the court frame; null where the ray misses."""
+    entry = state.cameras.get(tenant_id, body.court_id)
+    genome = _calibrated(entry)
+    floor_xy, status = camera.pixel_to_floor(genome, _as_array(body.pixels))
+    ok = status == camera.RAY_OK
+    inside = (
+        ok
+        & (floor_xy[:, 0] >= 0.0)
+        & (floor_xy[:, 0] <= entry.court_width_m)
+        & (floor_xy[:, 1] >= 0.0)
+        & (floor_xy[:, 1] <= entry.court_length_m)
+    )
+    return _json(
+        {
+            "points": _pairs_or_null(floor_xy),
+            "inside_court": inside.tolist(),
+            "calibration_id": entry.calibration_id,
+        }
+    )
+
+
+@router.post("/courts/{court_id}/image-points", response_model=ImagePointsResponse)
+def image_points(
+    court_id: str, body: ImagePointsRequest, state: StateDep, tenant_id: TenantDep
+) -> Response:
+    """Floor (x, y) metres -> image pixels; null where the point is behind the camera."""
+    entry = state.cameras.get(tenant_id, court_id)
+    genome = _calibrated(entry)
+    pixels = camera.floor_to_pixel(genome, _as_array(body.points))
+    assert entry.image_size is not None
+    width, height = entry.image_size
+    with np.errstate(invalid="ignore"):
+        # pixel centres at integers: the image spans -0.5 .. size - 0.5
+        in_image = (
+            np.isfinite(pixels).all(axis=1)
+            & (pixels[:, 0] >= -0.5)
+            & (pixels[:, 0] <= width - 0.5)
+            & (pixels[:, 1] >= -0.5)
+            & (pixels[:, 1] <= height - 0.5)
+        )
+    return _json(
+        {
+            "pixels": _pairs_or_null(pixels),
+            "in_image": in_image.tolist(),
+            "calibration_id": entry.calibration_id,
+        }
+    )

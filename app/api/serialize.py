@@ -1,0 +1,62 @@
+"""Rows -> response models (one place, so every endpoint shows a resource the same way)."""
+
+from __future__ import annotations
+
+from app.db.models import Calibration, Court, Job
+from app.schemas import CalibrationOut, CourtOut, JobError, JobOut, OpenCVCamera
+
+
+def court_out(court: Court) -> CourtOut:
+    return CourtOut(
+        id=court.id,
+        name=court.name,
+        spec=court.spec,
+        active_calibration_id=court.active_calibration_id,
+        created_at=court.created_at,
+    )
+
+
+def job_out(job: Job) -> JobOut:
+    error = None
+    if job.status == "failed" and job.error_code is not None:
+        error = JobError(code=job.error_code, message=job.error_message or "")
+    return JobOut(
+        id=job.id,
+        court_id=job.court_id,
+        status=job.status,  # type: ignore[arg-type]
+        stage=job.stage,  # type: ignore[arg-type]
+        progress=job.progress,
+        generation=job.generation,
+        best_fitness=job.best_fitness,
+        attempts=job.attempts,
+        max_attempts=job.max_attempts,
+        media_kind=job.media_kind,  # type: ignore[arg-type]
+        n_files=len(job.media_files),
+        error=error,
+        calibration_id=job.calibration_id,
+        created_at=job.created_at,
+        started_at=job.started_at,
+        finished_at=job.finished_at,
+        timings_s={k: float(v) for k, v in (job.timings or {}).items()},
+    )
+
+
+def calibration_out(cal: Calibration, active: bool) -> CalibrationOut:
+    result = cal.result or {}
+    return CalibrationOut(
+        id=cal.id,
+        court_id=cal.court_id,
+        job_id=cal.job_id,
+        spec=cal.spec,
+        opencv=OpenCVCamera(**cal.opencv),
+        genome=list(cal.genome),
+        fitness=cal.fitness,
+        quality=cal.quality,
+        seed=result.get("seed"),
+        bundle=result.get("bundle"),
+        generations=result.get("generations"),
+        created_at=cal.created_at,
+        active=active,
+        background_url=f"/calibrations/{cal.id}/background.png",
+        overlay_url=f"/calibrations/{cal.id}/overlay.png",
+    )

@@ -1,0 +1,1 @@
+"""Database layer: models, sessions, tenant-scoped repository, the job queue and migrations."""

@@ -1,0 +1,269 @@
+"""The jobs table as a work queue: enqueue (repo.new_job), claim, heartbeat, finish, release.
+
+Every state change updates only rows in the state it expects (status and owning worker), so a worker
+whose lease expired and whose job was re-claimed elsewhere cannot overwrite the new owner's work.
+Claims are atomic: on SQLite the transaction starts with BEGIN IMMEDIATE (one writer at a time, so
+the select-then-update inside one UPDATE statement cannot race); on PostgreSQL the candidate row is
+locked with FOR UPDATE SKIP LOCKED so concurrent workers pick different jobs without waiting.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import datetime, timedelta
+from typing import Any
+
+from sqlalchemy import Engine, or_, select, update
+from sqlalchemy.orm import Session
+
+from app.db.models import Calibration, Court, Job, utcnow
+from app.db.session import write_engine
+
+
+class LeaseLost(RuntimeError):
+    """The job is no longer running under this worker (lease expired and someone else took it)."""
+
+
+@dataclass(frozen=True)
+class ClaimedJob:
+    id: str
+    tenant_id: str
+    court_id: str
+    spec: str
+    attempt: int
+    max_attempts: int
+    media_kind: str
+    media_files: list[str]
+    params: dict[str, Any]
+    created_at: datetime
+
+
+@dataclass
+class Progress:
+    stage: str
+    progress: float
+    generation: int | None = None
+    best_fitness: float | None = None
+
+
+def _expired(now: datetime) -> Any:
+    return (Job.status == "running") & (Job.lease_expires_at < now)
+
+
+def claim(
+    engine: Engine, worker_id: str, lease_s: float, now: datetime | None = None
+) -> ClaimedJob | None:
+    """Atomically take the oldest claimable job (queued, or running with an expired lease)."""
+    now = now or utcnow()
+    with Session(write_engine(engine)) as session, session.begin():
+        # A job whose worker died on its last attempt will never be retried: fail it with a reason.
+        session.execute(
+            update(Job)
+            .where(_expired(now), Job.attempts >= Job.max_attempts)
+            .values(
+                status="failed",
+                error_code="worker_lost",
+                error_message=(
+                    "the worker running this job stopped responding (lease expired) and the job "
+                    "has used all its attempts"
+                ),
+                worker_id=None,
+                lease_expires_at=None,
+                finished_at=now,
+                updated_at=now,
+            )
+            .execution_options(synchronize_session=False)
+        )
+        candidate = (
+            select(Job.id)
+            .where(or_(Job.status == "queued", _expired(now)), Job.attempts < Job.max_attempts)
+            .order_by(Job.created_at, Job.id)
+            .limit(1)
+            .with_for_update(skip_locked=True)
+            .scalar_subquery()
+        )
+        job = session.scalars(
+            update(Job)
+            .where(Job.id == candidate)
+            .values(
+                status="running",
+                stage="background",
+                progress=0.0,
+                generation=None,
+                best_fitness=None,
+                attempts=Job.attempts + 1,
+                worker_id=worker_id,
+                lease_expires_at=now + timedelta(seconds=lease_s),
+                started_at=now,
+                updated_at=now,
+            )
+            .returning(Job)
+            .execution_options(synchronize_session=False)
+        ).first()
+        if job is None:
+            return None
+        court = session.get(Court, job.court_id)
+        if court is None:  # FK cascade makes this impossible short of manual surgery
+            raise RuntimeError(f"job {job.id} refers to a missing court {job.court_id}")
+        return ClaimedJob(
+            id=job.id,
+            tenant_id=job.tenant_id,
+            court_id=job.court_id,
+            spec=court.spec,
+            attempt=job.attempts,
+            max_attempts=job.max_attempts,
+            media_kind=job.media_kind,
+            media_files=list(job.media_files),
+            params=dict(job.params),
+            created_at=job.created_at,
+        )
+
+
+def _owned_running(job_id: str, worker_id: str) -> Any:
+    return (Job.id == job_id) & (Job.status == "running") & (Job.worker_id == worker_id)
+
+
+def heartbeat(
+    engine: Engine,
+    job_id: str,
+    worker_id: str,
+    lease_s: float,
+    progress: Progress | None = None,
+    now: datetime | None = None,
+) -> bool:
+    """Renew the lease (and write progress). False when the job is no longer ours."""
+    now = now or utcnow()
+    values: dict[str, Any] = {
+        "lease_expires_at": now + timedelta(seconds=lease_s),
+        "updated_at": now,
+    }
+    if progress is not None:
+        values.update(
+            stage=progress.stage,
+            progress=min(1.0, max(0.0, float(progress.progress))),
+            generation=progress.generation,
+            best_fitness=progress.best_fitness,
+        )
+    with Session(engine) as session, session.begin():
+        result = session.execute(
+            update(Job)
+            .where(_owned_running(job_id, worker_id))
+            .values(**values)
+            .execution_options(synchronize_session=False)
+        )
+        return bool(result.rowcount)  # type: ignore[attr-defined]
+
+
+def finish_success(
+    engine: Engine,
+    job: ClaimedJob,
+    worker_id: str,
+    calibration: Calibration,
+    timings: dict[str, float],
+    now: datetime | None = None,
+) -> None:
+    """Store the calibration, mark the job succeeded and make it the court's active camera: one
+    transaction. The court's camera only moves forward: an older upload finishing late does not
+    replace the camera of a newer one. Raises LeaseLost (and stores nothing) if the job is not ours.
+    """
+    now = now or utcnow()
+    with Session(write_engine(engine)) as session, session.begin():
+        result = session.execute(
+            update(Job)
+            .where(_owned_running(job.id, worker_id))
+            .values(
+                status="succeeded",
+                stage="done",
+                progress=1.0,
+                calibration_id=calibration.id,
+                error_code=None,
+                error_message=None,
+                timings=timings,
+                lease_expires_at=None,
+                finished_at=now,
+                updated_at=now,
+            )
+            .execution_options(synchronize_session=False)
+        )
+        if not result.rowcount:  # type: ignore[attr-defined]
+            raise LeaseLost(f"job {job.id} is no longer running under worker {worker_id}")
+        session.add(calibration)
+        court = session.scalars(
+            select(Court).where(Court.id == job.court_id).with_for_update()
+        ).one()
+        newer_than_active = True
+        if court.active_calibration_id is not None:
+            active_job_created = session.scalar(
+                select(Job.created_at)
+                .join(Calibration, Calibration.job_id == Job.id)
+                .where(Calibration.id == court.active_calibration_id)
+            )
+            newer_than_active = active_job_created is None or active_job_created <= job.created_at
+        if newer_than_active:
+            session.flush()
+            court.active_calibration_id = calibration.id
+
+
+def finish_failure(
+    engine: Engine,
+    job_id: str,
+    worker_id: str,
+    code: str,
+    message: str,
+    retryable: bool,
+    timings: dict[str, float] | None = None,
+    now: datetime | None = None,
+) -> str:
+    """Record an error. Retryable errors requeue the job while attempts remain; returns the new
+    status ("queued" or "failed"). Raises LeaseLost if the job is not ours."""
+    now = now or utcnow()
+    with Session(write_engine(engine)) as session, session.begin():
+        row = session.execute(
+            select(Job.attempts, Job.max_attempts).where(_owned_running(job_id, worker_id))
+        ).first()
+        if row is None:
+            raise LeaseLost(f"job {job_id} is no longer running under worker {worker_id}")
+        attempts, max_attempts = row
+        status = "queued" if retryable and attempts < max_attempts else "failed"
+        values: dict[str, Any] = {
+            "status": status,
+            "stage": "queued" if status == "queued" else "done",
+            "error_code": code,
+            "error_message": message,
+            "worker_id": None,
+            "lease_expires_at": None,
+            "updated_at": now,
+        }
+        if status == "failed":
+            values["finished_at"] = now
+        if timings is not None:
+            values["timings"] = timings
+        result = session.execute(
+            update(Job)
+            .where(_owned_running(job_id, worker_id))
+            .values(**values)
+            .execution_options(synchronize_session=False)
+        )
+        if not result.rowcount:  # type: ignore[attr-defined]
+            raise LeaseLost(f"job {job_id} is no longer running under worker {worker_id}")
+        return status
+
+
+def release(engine: Engine, job_id: str, worker_id: str, now: datetime | None = None) -> bool:
+    """Give a job back to the queue without counting the attempt (worker shutting down)."""
+    now = now or utcnow()
+    with Session(write_engine(engine)) as session, session.begin():
+        result = session.execute(
+            update(Job)
+            .where(_owned_running(job_id, worker_id))
+            .values(
+                status="queued",
+                stage="queued",
+                attempts=Job.attempts - 1,
+                worker_id=None,
+                lease_expires_at=None,
+                updated_at=now,
+            )
+            .execution_options(synchronize_session=False)
+        )
+        return bool(result.rowcount)  # type: ignore[attr-defined]

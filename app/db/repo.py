@@ -1,0 +1,142 @@
+"""Reads and writes of tenants' resources. Every read of a court, job or calibration goes through
+`get_owned`, which filters by tenant, so another tenant's row is indistinguishable from a missing one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import secrets
+from collections.abc import Sequence
+from typing import Any, TypeVar
+
+from sqlalchemy import select, update
+from sqlalchemy.orm import Session
+
+from app.db.models import ApiKey, Calibration, Court, Job, Tenant, utcnow
+
+KEY_PREFIX = "sqc_"
+
+Owned = TypeVar("Owned", Court, Job, Calibration)
+
+
+class NotFound(LookupError):
+    """The resource does not exist or belongs to another tenant (the caller cannot tell which)."""
+
+    def __init__(self, kind: str, resource_id: str) -> None:
+        super().__init__(f"{kind} {resource_id!r} not found")
+        self.kind = kind
+        self.resource_id = resource_id
+
+
+def hash_key(key: str) -> str:
+    return hashlib.sha256(key.encode("utf-8")).hexdigest()
+
+
+def create_api_key(session: Session, name: str, tenant_id: str | None = None) -> tuple[ApiKey, str]:
+    """A new key for `tenant_id` (or for a new tenant called `name`); returns (row, the key)."""
+    if not name.strip():
+        raise ValueError("a key needs a non-empty name")
+    if tenant_id is None:
+        tenant = Tenant(name=name)
+        session.add(tenant)
+        session.flush()
+        tenant_id = tenant.id
+    elif session.get(Tenant, tenant_id) is None:
+        raise ValueError(f"no tenant with id {tenant_id!r}")
+    key = KEY_PREFIX + secrets.token_urlsafe(32)
+    row = ApiKey(tenant_id=tenant_id, name=name, key_sha256=hash_key(key))
+    session.add(row)
+    session.flush()
+    return row, key
+
+
+def list_api_keys(session: Session) -> Sequence[ApiKey]:
+    return session.scalars(select(ApiKey).order_by(ApiKey.created_at)).all()
+
+
+def revoke_api_key(session: Session, key_id: str) -> bool:
+    result = session.execute(
+        update(ApiKey)
+        .where(ApiKey.id == key_id, ApiKey.revoked_at.is_(None))
+        .values(revoked_at=utcnow())
+    )
+    return bool(result.rowcount)  # type: ignore[attr-defined]
+
+
+def tenant_for_key_hash(session: Session, key_sha256: str) -> str | None:
+    return session.scalar(
+        select(ApiKey.tenant_id).where(ApiKey.key_sha256 == key_sha256, ApiKey.revoked_at.is_(None))
+    )
+
+
+def get_owned(session: Session, model: type[Owned], tenant_id: str, resource_id: str) -> Owned:
+    """The one tenant-scoped read: the row if it exists AND belongs to `tenant_id`, else NotFound."""
+    row = session.scalar(select(model).where(model.id == resource_id, model.tenant_id == tenant_id))
+    if row is None:
+        raise NotFound(model.__name__.lower(), resource_id)
+    return row
+
+
+def list_courts(session: Session, tenant_id: str) -> Sequence[Court]:
+    return session.scalars(
+        select(Court).where(Court.tenant_id == tenant_id).order_by(Court.created_at, Court.id)
+    ).all()
+
+
+def create_court(session: Session, tenant_id: str, name: str, spec: str) -> Court:
+    court = Court(tenant_id=tenant_id, name=name, spec=spec)
+    session.add(court)
+    session.flush()
+    return court
+
+
+def list_calibrations(session: Session, tenant_id: str, court_id: str) -> Sequence[Calibration]:
+    court = get_owned(session, Court, tenant_id, court_id)
+    return session.scalars(
+        select(Calibration)
+        .where(Calibration.court_id == court.id, Calibration.tenant_id == tenant_id)
+        .order_by(Calibration.created_at.desc())
+    ).all()
+
+
+def active_calibration(session: Session, tenant_id: str, court_id: str) -> Calibration | None:
+    court = get_owned(session, Court, tenant_id, court_id)
+    if court.active_calibration_id is None:
+        return None
+    return get_owned(session, Calibration, tenant_id, court.active_calibration_id)
+
+
+def active_calibration_ids(session: Session, court_ids: Sequence[str]) -> dict[str, str | None]:
+    """court id -> active calibration id, for the API's camera cache refresher (not tenant data)."""
+    rows = session.execute(
+        select(Court.id, Court.active_calibration_id).where(Court.id.in_(list(court_ids)))
+    ).all()
+    return {court_id: cal_id for court_id, cal_id in rows}
+
+
+def new_job(
+    session: Session,
+    *,
+    job_id: str,
+    tenant_id: str,
+    court_id: str,
+    media_kind: str,
+    media_files: list[str],
+    params: dict[str, Any],
+    max_attempts: int,
+) -> Job:
+    job = Job(
+        id=job_id,
+        tenant_id=tenant_id,
+        court_id=court_id,
+        media_kind=media_kind,
+        media_files=media_files,
+        params=params,
+        max_attempts=max_attempts,
+        status="queued",
+        stage="queued",
+        timings={},
+    )
+    session.add(job)
+    session.flush()
+    return job

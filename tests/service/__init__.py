@@ -1,0 +1,1 @@
+"""Service tests: API, queue, worker, migrations, end to end."""

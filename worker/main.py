@@ -1,0 +1,342 @@
+"""The worker process: claim a job, run the calibration, store the result; repeat.
+
+Leases: a heartbeat thread renews the job's lease (and writes progress, at most every
+`progress_interval_s`) while the main thread computes. If the lease is lost (the worker stalled
+past it and another worker took the job) the result is discarded. SIGTERM/SIGINT: stop claiming,
+let the current job finish within `shutdown_grace_s`, otherwise give it back to the queue.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import signal
+import socket
+import threading
+import time
+import uuid
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+from sqlalchemy import Engine
+
+from app.calib.background import background_from_frames
+from app.db import media, queue
+from app.db.models import Calibration, new_id
+from app.db.session import make_engine
+from app.settings import Settings
+from worker.media import MediaError, load_frames
+
+log = logging.getLogger("squashcal.worker")
+
+# Overall job progress at the start of each stage; the stage's own fraction fills its span.
+STAGE_SPANS: dict[str, tuple[float, float]] = {
+    "background": (0.0, 0.05),
+    "edges": (0.05, 0.1),
+    "optimising": (0.1, 0.9),
+    "refining": (0.9, 0.95),
+    "storing": (0.95, 1.0),
+}
+# After the grace period, the main thread gets this long to notice the abort before the process
+# gives the job back and exits on its own.
+HARD_EXIT_AFTER_S = 10.0
+
+
+class JobAborted(Exception):
+    """Raised inside the calibration (from its progress callback) to stop work on a job."""
+
+
+@dataclass
+class Shutdown:
+    """Set by SIGTERM/SIGINT; `deadline` is when the current job must be given up."""
+
+    requested: threading.Event
+    deadline: float | None = None
+
+    def request(self, grace_s: float) -> None:
+        if not self.requested.is_set():
+            self.deadline = time.monotonic() + grace_s
+            self.requested.set()
+
+
+class Heartbeat(threading.Thread):
+    """Renews the lease and writes progress; tells the main thread when to abort."""
+
+    def __init__(
+        self,
+        engine: Engine,
+        job: queue.ClaimedJob,
+        worker_id: str,
+        settings: Settings,
+        shutdown: Shutdown,
+    ) -> None:
+        super().__init__(name=f"heartbeat-{job.id[:8]}", daemon=True)
+        self.engine = engine
+        self.job = job
+        self.worker_id = worker_id
+        self.lease_s = settings.lease_s
+        self.interval_s = settings.progress_interval_s
+        self.shutdown = shutdown
+        self._lock = threading.Lock()
+        self._latest = queue.Progress(stage="background", progress=0.0)
+        self._dirty = True
+        self._stop_event = threading.Event()
+        self.abort_reason: str | None = None  # "lease_lost" | "shutdown"
+        self.released = False
+
+    # -- called from the main thread
+    def report(
+        self,
+        stage: str,
+        fraction: float,
+        generation: int | None = None,
+        best_fitness: float | None = None,
+    ) -> None:
+        lo, hi = STAGE_SPANS.get(stage, (0.0, 1.0))
+        overall = lo + (hi - lo) * min(max(fraction, 0.0), 1.0)
+        with self._lock:
+            previous = self._latest
+            self._latest = queue.Progress(
+                stage=stage,
+                progress=max(previous.progress, overall),
+                generation=generation if generation is not None else previous.generation,
+                best_fitness=best_fitness if best_fitness is not None else previous.best_fitness,
+            )
+            self._dirty = True
+        self.check()
+
+    def pipeline_progress(self, stage: str, fraction: float, info: dict[str, Any]) -> None:
+        generation = info.get("generation")
+        best = info.get("best_fitness")
+        self.report(
+            stage,
+            fraction,
+            int(generation) if generation is not None else None,
+            float(best) if best is not None and np.isfinite(best) else None,
+        )
+
+    def check(self) -> None:
+        if self.abort_reason is not None:
+            raise JobAborted(self.abort_reason)
+
+    def stop(self) -> None:
+        self._stop_event.set()
+        self.join(timeout=5 * self.interval_s + 5)
+
+    # -- the thread
+    def run(self) -> None:
+        last_write = 0.0
+        while not self._stop_event.wait(self.interval_s):
+            now = time.monotonic()
+            if (
+                self.shutdown.deadline is not None
+                and now > self.shutdown.deadline
+                and self.abort_reason is None
+            ):
+                self.abort_reason = "shutdown"
+                self.released = queue.release(self.engine, self.job.id, self.worker_id)
+                log.warning("job %s given back to the queue (shutdown grace over)", self.job.id)
+                threading.Thread(target=self._hard_exit, daemon=True).start()
+                return
+            with self._lock:
+                dirty = self._dirty
+                latest = self._latest
+                self._dirty = False
+            if not dirty and now - last_write < self.lease_s / 3:
+                continue
+            try:
+                ours = queue.heartbeat(
+                    self.engine,
+                    self.job.id,
+                    self.worker_id,
+                    self.lease_s,
+                    latest if dirty else None,
+                )
+            except Exception:  # the database may be briefly unavailable; the lease has slack
+                log.exception("heartbeat for job %s failed", self.job.id)
+                with self._lock:
+                    self._dirty = self._dirty or dirty
+                continue
+            last_write = now
+            if not ours:
+                self.abort_reason = "lease_lost"
+                log.warning("job %s: lease lost, another worker owns it now", self.job.id)
+                return
+
+    def _hard_exit(self) -> None:
+        if not self._stop_event.wait(HARD_EXIT_AFTER_S):
+            log.error("job %s did not stop after the grace period; exiting", self.job.id)
+            os._exit(0)
+
+
+def _write_png(path: Any, image: np.ndarray) -> None:
+    if not cv2.imwrite(str(path), image):
+        raise OSError(f"could not write {path}")
+
+
+def process_job(
+    engine: Engine,
+    settings: Settings,
+    job: queue.ClaimedJob,
+    worker_id: str,
+    shutdown: Shutdown,
+) -> str:
+    """Run one claimed job to its end. Returns the job's new status (or "released"/"lost")."""
+    from app.calib import pipeline
+
+    heartbeat = Heartbeat(engine, job, worker_id, settings, shutdown)
+    heartbeat.start()
+    timings: dict[str, float] = {}
+    t_start = time.perf_counter()
+    cal_dir = None
+    try:
+        heartbeat.report("background", 0.0)
+        t0 = time.perf_counter()
+        frames = load_frames(settings, job.id, job.media_kind, job.media_files)
+        heartbeat.check()
+        background, moving_mask = background_from_frames(frames)
+        timings["background"] = time.perf_counter() - t0
+        heartbeat.report("background", 1.0)
+
+        kwargs: dict[str, Any] = {"seed": int(job.params.get("seed") or 0), "spec": job.spec}
+        if job.params.get("start_genome") is not None:
+            kwargs["start_genome"] = np.asarray(job.params["start_genome"], dtype=np.float64)
+        if job.params.get("bundle"):
+            kwargs["bundle"] = job.params["bundle"]
+        if settings.ga_max_generations is not None:
+            kwargs["max_generations"] = settings.ga_max_generations
+        if settings.ga_time_budget_s is not None:
+            kwargs["time_budget_s"] = settings.ga_time_budget_s
+        t0 = time.perf_counter()
+        result = pipeline.calibrate(
+            background,
+            moving_mask=moving_mask if np.any(moving_mask) else None,
+            progress=heartbeat.pipeline_progress,
+            **kwargs,
+        )
+        timings["calibrate"] = time.perf_counter() - t0
+        for stage, seconds in result.timings_s.items():
+            timings[f"calibrate.{stage}"] = float(seconds)
+
+        heartbeat.report("storing", 0.0)
+        t0 = time.perf_counter()
+        calibration_id = new_id()
+        cal_dir = media.calibration_dir(settings, calibration_id)
+        cal_dir.mkdir(parents=True, exist_ok=True)
+        _write_png(cal_dir / "background.png", background)
+        _write_png(
+            cal_dir / "overlay.png", pipeline.draw_overlay(background, result.genome, job.spec)
+        )
+        media.fsync_tree(cal_dir)
+        heartbeat.check()
+        result_json = result.to_json()
+        timings["storing"] = time.perf_counter() - t0
+        timings["total"] = time.perf_counter() - t_start
+        calibration = Calibration(
+            id=calibration_id,
+            tenant_id=job.tenant_id,
+            court_id=job.court_id,
+            job_id=job.id,
+            spec=job.spec,
+            genome=result_json["genome"],
+            opencv=result_json["opencv"],
+            fitness=float(result.fitness),
+            quality=result_json["quality"],
+            result=result_json,
+            image_width=int(result.image_size[0]),
+            image_height=int(result.image_size[1]),
+        )
+        queue.finish_success(engine, job, worker_id, calibration, _rounded(timings))
+        cal_dir = None  # committed: keep the images
+        log.info("job %s succeeded: calibration %s", job.id, calibration_id)
+        return "succeeded"
+    except JobAborted as exc:
+        if str(exc) == "shutdown" and not heartbeat.released:
+            heartbeat.released = queue.release(engine, job.id, worker_id)
+        log.warning("job %s stopped: %s", job.id, exc)
+        return "released" if str(exc) == "shutdown" else "lost"
+    except queue.LeaseLost:
+        log.warning("job %s: lease lost before the result was stored; discarded", job.id)
+        return "lost"
+    except pipeline.CourtNotFound as exc:
+        return _fail(engine, job, worker_id, "court_not_found", str(exc), False, timings, t_start)
+    except MediaError as exc:
+        return _fail(engine, job, worker_id, exc.code, exc.message, False, timings, t_start)
+    except ValueError as exc:
+        return _fail(engine, job, worker_id, "invalid_input", str(exc), False, timings, t_start)
+    except Exception as exc:
+        log.exception("job %s failed on attempt %d", job.id, job.attempt)
+        message = f"{type(exc).__name__}: {exc}"
+        return _fail(engine, job, worker_id, "calibration_error", message, True, timings, t_start)
+    finally:
+        heartbeat.stop()
+        if cal_dir is not None:  # not committed: leave no orphaned images behind
+            shutil.rmtree(cal_dir, ignore_errors=True)
+
+
+def _rounded(timings: dict[str, float]) -> dict[str, float]:
+    return {k: round(float(v), 4) for k, v in timings.items()}
+
+
+def _fail(
+    engine: Engine,
+    job: queue.ClaimedJob,
+    worker_id: str,
+    code: str,
+    message: str,
+    retryable: bool,
+    timings: dict[str, float],
+    t_start: float,
+) -> str:
+    timings["total"] = time.perf_counter() - t_start
+    try:
+        status = queue.finish_failure(
+            engine, job.id, worker_id, code, message, retryable, _rounded(timings)
+        )
+    except queue.LeaseLost:
+        return "lost"
+    log.warning("job %s: %s (%s): %s", job.id, status, code, message)
+    return status
+
+
+def default_worker_id() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:6]}"
+
+
+def run_worker(settings: Settings, once: bool = False, worker_id: str | None = None) -> int:
+    """Claim and process jobs until SIGTERM/SIGINT (or after one job with `once`)."""
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s %(message)s")
+    worker_id = worker_id or default_worker_id()
+    shutdown = Shutdown(threading.Event())
+
+    def on_signal(signum: int, frame: object) -> None:
+        log.info("signal %d: no new jobs; finishing the current one", signum)
+        shutdown.request(settings.shutdown_grace_s)
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    engine = make_engine(settings)
+    log.info("worker %s polling %s", worker_id, engine.url.render_as_string(hide_password=True))
+    try:
+        while not shutdown.requested.is_set():
+            try:
+                job = queue.claim(engine, worker_id, settings.lease_s)
+            except Exception:
+                log.exception("claim failed; retrying")
+                job = None
+            if job is None:
+                if once:
+                    return 0
+                shutdown.requested.wait(settings.poll_interval_s)
+                continue
+            log.info("job %s claimed (attempt %d/%d)", job.id, job.attempt, job.max_attempts)
+            process_job(engine, settings, job, worker_id, shutdown)
+            if once:
+                return 0
+    finally:
+        engine.dispose()
+    log.info("worker %s stopped", worker_id)
+    return 0
