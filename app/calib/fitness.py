@@ -111,11 +111,11 @@ def _bilinear(fmap: np.ndarray, u: float, v: float) -> float:
     (gathers), the largest single speed-up of the fitness.
     """
     h, w = fmap.shape
-    iu = min(numba.uint64(u), numba.uint64(w - 2))
-    iv = min(numba.uint64(v), numba.uint64(h - 2))
+    iu = min(np.uint64(u), np.uint64(w - 2))
+    iv = min(np.uint64(v), np.uint64(h - 2))
     fu = u - np.float64(iu)
     fv = v - np.float64(iv)
-    one = numba.uint64(1)
+    one = np.uint64(1)
     a = fmap[iv, iu]
     b = fmap[iv, iu + one]
     c = fmap[iv + one, iu]
