@@ -162,9 +162,7 @@ def _check_inputs(
     max_generations: int,
     time_budget_s: float | None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    fmap = np.asarray(fitness_map)
-    if fmap.ndim != 2 or min(fmap.shape) < 1:
-        raise ValueError(f"fitness map must be a non-empty (H, W) array, got {fmap.shape}")
+    fmap = fit.check_fitness_map(fitness_map)
     start = np.asarray(start_genome, dtype=np.float64)
     if start.shape != (N_GENES,) or not np.all(np.isfinite(start)):
         raise ValueError("start genome must be 15 finite numbers")
@@ -172,7 +170,7 @@ def _check_inputs(
         raise ValueError("stall_generations and max_generations must be at least 1")
     if time_budget_s is not None and not time_budget_s > 0:
         raise ValueError("time_budget_s must be positive (or None)")
-    return np.ascontiguousarray(fmap, dtype=np.float32), np.ascontiguousarray(start)
+    return fmap, np.ascontiguousarray(start)
 
 
 def run_ga(
