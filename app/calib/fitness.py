@@ -105,14 +105,13 @@ def extrinsics_njit(g: np.ndarray, r: np.ndarray, t: np.ndarray) -> None:
 
 @numba.njit(cache=True, inline="always")
 def _bilinear(fmap: np.ndarray, u: float, v: float) -> float:
-    """Bilinear lookup at (u, v) in [0, W-1] x [0, H-1] (guaranteed by the caller; W, H >= 2).
+    """Bilinear lookup at 0 <= u < W - 1, 0 <= v < H - 1 (the caller clamps, see `_index_limit`).
 
-    Unsigned indices and a clamp instead of branches: this keeps the loop around it vectorisable
-    (gathers), the largest single speed-up of the fitness.
+    No clamps or branches here: that keeps the loop around it vectorisable with gathers, which
+    halves the cost of the lookups.
     """
-    h, w = fmap.shape
-    iu = min(np.uint64(u), np.uint64(w - 2))
-    iv = min(np.uint64(v), np.uint64(h - 2))
+    iu = np.uint64(u)
+    iv = np.uint64(v)
     fu = u - np.float64(iu)
     fv = v - np.float64(iv)
     one = np.uint64(1)
@@ -123,6 +122,13 @@ def _bilinear(fmap: np.ndarray, u: float, v: float) -> float:
     top = a + fu * (b - a)
     bottom = c + fu * (d - c)
     return top + fv * (bottom - top)
+
+
+@numba.njit(cache=True, inline="always")
+def _index_limit(size: int) -> float:
+    """Largest coordinate below size - 1: the last pixel centre is then read as 1 - 2e-13 of the way
+    from its neighbour, so `_bilinear` never indexes past the map."""
+    return np.nextafter(float(size - 1), 0.0)
 
 
 @numba.njit(cache=True)
@@ -162,6 +168,9 @@ def _clipped_segment(
                 if s < t0:
                     return 0.0
                 t1 = min(t1, s)
+    h, w = fmap.shape
+    u_lim = _index_limit(w)
+    v_lim = _index_limit(h)
     a_u = min(max(u0 + t0 * du, 0.0), u_max)
     a_v = min(max(v0 + t0 * dv, 0.0), v_max)
     b_u = min(max(u0 + t1 * du, 0.0), u_max)
@@ -169,7 +178,9 @@ def _clipped_segment(
     length = max(abs(b_u - a_u), abs(b_v - a_v))
     if length == 0.0:
         return 0.0
-    return 0.5 * (_bilinear(fmap, a_u, a_v) + _bilinear(fmap, b_u, b_v)) * length
+    f_a = _bilinear(fmap, min(a_u, u_lim), min(a_v, v_lim))
+    f_b = _bilinear(fmap, min(b_u, u_lim), min(b_v, v_lim))
+    return 0.5 * (f_a + f_b) * length
 
 
 class SampleArrays(NamedTuple):
@@ -192,14 +203,10 @@ def sample_arrays(samples: LineSamples) -> SampleArrays:
 class Workspace(NamedTuple):
     """Scratch buffers (M,) for one genome's fitness, reused across a population and generations."""
 
-    u: np.ndarray
-    v: np.ndarray
-    u_in: np.ndarray
+    u_in: np.ndarray  # pixel of sample j if inside the image, else 0 (index-safe)
     v_in: np.ndarray
-    in_front: np.ndarray
-    inside: np.ndarray
-    segment: np.ndarray
-    weight: np.ndarray
+    inside: np.ndarray  # 1.0 / 0.0
+    segment: np.ndarray  # Chebyshev length of inside sub-segment j (j -> j + 1), else 0
     r: np.ndarray
     t: np.ndarray
 
@@ -211,36 +218,30 @@ def make_workspace(n_samples: int) -> Workspace:
         np.empty(n_samples),
         np.empty(n_samples),
         np.empty(n_samples),
-        np.empty(n_samples),
-        np.empty(n_samples),
-        np.empty(n_samples),
-        np.empty(n_samples),
         np.empty((3, 3)),
         np.empty(3),
     )
 
 
 @numba.njit(cache=True)
-def _project_samples(
-    g: np.ndarray, xyz: np.ndarray, u_max: float, v_max: float, ws: Workspace
-) -> int:
-    """Pass 1: pixels, visibility flags and index-safe coordinates; returns the count inside."""
+def _project_samples(g: np.ndarray, xyz: np.ndarray, fmap: np.ndarray, ws: Workspace) -> int:
+    """Pass 1: index-safe pixels and inside flags of all samples; returns the count inside."""
+    h, w = fmap.shape
+    u_max = float(w - 1)
+    v_max = float(h - 1)
+    u_lim = _index_limit(w)
+    v_lim = _index_limit(h)
     r, t = ws.r, ws.t
     extrinsics_njit(g, r, t)
     xs, ys, zs = xyz[0], xyz[1], xyz[2]
-    u, v, u_in, v_in, in_front, inside = ws.u, ws.v, ws.u_in, ws.v_in, ws.in_front, ws.inside
+    u_in, v_in, inside = ws.u_in, ws.v_in, ws.inside
     n_inside = 0
     for j in range(xs.shape[0]):
         pu, pv, pz = project_point_njit(r, t, g, xs[j], ys[j], zs[j])
-        front = pz > MIN_DEPTH_M
-        # non-short-circuit `&` keeps this loop branch-free (vectorised)
-        ins = front & (pu >= 0.0) & (pu <= u_max) & (pv >= 0.0) & (pv <= v_max)
-        u[j] = pu
-        v[j] = pv
-        # finite and inside the map even where the projection is not (NaN compares False)
-        u_in[j] = pu if ins else 0.0
-        v_in[j] = pv if ins else 0.0
-        in_front[j] = 1.0 if front else 0.0
+        # non-short-circuit `&` keeps this loop branch-free (vectorised); NaN compares False
+        ins = (pz > MIN_DEPTH_M) & (pu >= 0.0) & (pu <= u_max) & (pv >= 0.0) & (pv <= v_max)
+        u_in[j] = min(pu, u_lim) if ins else 0.0
+        v_in[j] = min(pv, v_lim) if ins else 0.0
         inside[j] = 1.0 if ins else 0.0
         n_inside += 1 if ins else 0
     return n_inside
@@ -255,18 +256,35 @@ def _integrate_inside(joins_next: np.ndarray, fmap: np.ndarray, ws: Workspace) -
     plain reduction over lookups, which LLVM vectorises with gathers (reassociation allowed here
     only: the order is fixed at compile time, so results stay reproducible).
     """
-    u_in, v_in, inside, segment, weight = ws.u_in, ws.v_in, ws.inside, ws.segment, ws.weight
+    u_in, v_in, inside, segment = ws.u_in, ws.v_in, ws.inside, ws.segment
     n = u_in.shape[0]
     for j in range(n - 1):
         length = max(abs(u_in[j + 1] - u_in[j]), abs(v_in[j + 1] - v_in[j]))
         segment[j] = joins_next[j] * inside[j] * inside[j + 1] * length
     segment[n - 1] = 0.0
-    weight[0] = 0.5 * segment[0]
+    total = 0.5 * segment[0] * _bilinear(fmap, u_in[0], v_in[0])
     for j in range(1, n):
-        weight[j] = 0.5 * (segment[j - 1] + segment[j])
+        total += 0.5 * (segment[j - 1] + segment[j]) * _bilinear(fmap, u_in[j], v_in[j])
+    return total
+
+
+@numba.njit(cache=True)
+def _integrate_border(
+    g: np.ndarray, xyz: np.ndarray, joins_next: np.ndarray, fmap: np.ndarray, ws: Workspace
+) -> float:
+    """The inside parts of sub-segments with one or both ends outside the image (rare: projected
+    again here rather than stored for every sample in pass 1)."""
+    h, w = fmap.shape
+    u_max = float(w - 1)
+    v_max = float(h - 1)
+    r, t, inside = ws.r, ws.t, ws.inside
     total = 0.0
-    for j in range(n):
-        total += weight[j] * _bilinear(fmap, u_in[j], v_in[j])
+    for j in range(xyz.shape[1] - 1):
+        if joins_next[j] != 0.0 and inside[j] * inside[j + 1] == 0.0:
+            u0, v0, z0 = project_point_njit(r, t, g, xyz[0, j], xyz[1, j], xyz[2, j])
+            u1, v1, z1 = project_point_njit(r, t, g, xyz[0, j + 1], xyz[1, j + 1], xyz[2, j + 1])
+            if z0 > MIN_DEPTH_M and z1 > MIN_DEPTH_M:
+                total += _clipped_segment(fmap, u0, v0, u1, v1, u_max, v_max)
     return total
 
 
@@ -275,20 +293,10 @@ def genome_fitness_njit(
     g: np.ndarray, xyz: np.ndarray, joins_next: np.ndarray, fmap: np.ndarray, ws: Workspace
 ) -> float:
     """Fitness of one genome (see `population_fitness`); `fmap` float32 (H, W), H, W >= 2."""
-    h, w = fmap.shape
-    u_max = float(w - 1)
-    v_max = float(h - 1)
-    n = xyz.shape[1]
-    n_inside = _project_samples(g, xyz, u_max, v_max, ws)
+    n_inside = _project_samples(g, xyz, fmap, ws)
     total = _integrate_inside(joins_next, fmap, ws) if n_inside > 1 else 0.0
-    if n_inside < n:
-        u, v, in_front, inside = ws.u, ws.v, ws.in_front, ws.inside
-        for j in range(n - 1):
-            if (
-                joins_next[j] * in_front[j] * in_front[j + 1] != 0.0
-                and inside[j] * inside[j + 1] == 0.0
-            ):
-                total += _clipped_segment(fmap, u[j], v[j], u[j + 1], v[j + 1], u_max, v_max)
+    if n_inside < xyz.shape[1]:
+        total += _integrate_border(g, xyz, joins_next, fmap, ws)
     return total
 
 
