@@ -262,6 +262,11 @@ def test_ga_improves_and_keeps_its_elites(scene):
     assert result.population.shape == (16, 15)
     assert np.all(np.diff(result.population_fitness) <= 0.0)
     assert np.array_equal(result.population[0], result.genome)
+    # fitness values carried over (elites) or reused for exact copies are the true ones
+    recomputed = fitness.population_fitness(result.population, samples, fmap)
+    assert np.array_equal(result.population_fitness, recomputed)
+    most = 16 + (result.generations - 1) * 14
+    assert 16 < result.fitness_evaluations < most
     start_fitness = fitness.population_fitness(start, samples, fmap)[0]
     assert result.fitness > start_fitness
     error = synthetic.mean_reprojection_error(target, result.genome, court.floor_grid())

@@ -47,6 +47,7 @@ class GAResult:
     best_history: np.ndarray  # (generations,)
     population: np.ndarray  # (N, 15) last generation, best first
     population_fitness: np.ndarray  # (N,)
+    fitness_evaluations: int  # computed; elites and exact copies of known genomes are not
 
 
 def bundle_fitness_map(edge_image: np.ndarray, bundle: Bundle = DEFAULT_BUNDLE) -> np.ndarray:
@@ -67,6 +68,38 @@ def _sort_descending(fitness: np.ndarray, order: np.ndarray) -> None:
             order[j + 1] = order[j]
             j -= 1
         order[j + 1] = item
+
+
+@numba.njit(cache=True, inline="always")
+def _same_genome(a: np.ndarray, b: np.ndarray) -> bool:
+    # an explicit loop: numba compiles it to an early-exit compare, not a generator
+    for j in range(a.shape[0]):  # noqa: SIM110
+        if a[j] != b[j]:
+            return False
+    return True
+
+
+@numba.njit(cache=True)
+def _reuse_known_fitness(
+    c: int, next_pop: np.ndarray, next_fitness: np.ndarray, pop: np.ndarray, fitness: np.ndarray
+) -> bool:
+    """If child c is an exact copy of a genome whose fitness is known (current generation, or an
+    earlier row of the next one), copy that fitness and return True.
+
+    Once the population converges, a third to a half of all children are such copies (same
+    parent twice, cuts between equal genes, no mutation). The fitness is a pure function of the
+    genome, so reusing it changes nothing in the run, bit for bit.
+    """
+    child = next_pop[c]
+    for k in range(pop.shape[0]):
+        if _same_genome(pop[k], child):
+            next_fitness[c] = fitness[k]
+            return True
+    for k in range(c):
+        if _same_genome(next_pop[k], child):
+            next_fitness[c] = next_fitness[k]
+            return True
+    return False
 
 
 @numba.njit(cache=True)
@@ -111,8 +144,8 @@ def _evolve(
 ) -> tuple[int, int]:
     """Run up to `n_steps` generations of Algorithm 1 on (pop, fitness), updated in place.
 
-    counters = [generations evaluated, generation of the last strict improvement]; best = [best
-    fitness]. history receives the best fitness after each new generation. Returns (steps done,
+    counters = [generations evaluated, generation of the last strict improvement, fitness
+    evaluations computed]; best = [best fitness]. history receives the best fitness after each new generation. Returns (steps done,
     stop code).
     """
     n = pop.shape[0]
@@ -137,7 +170,10 @@ def _evolve(
             ops.mutate(next_pop[i], mut_probability, mut_kind, mut_a, mut_b, mut_offset, rng)
             ops.mutate(second, mut_probability, mut_kind, mut_a, mut_b, mut_offset, rng)
             i += 2
-        fit.population_fitness_njit(next_pop, xyz, joins_next, fmap, ws, next_fitness, 2)
+        for c in range(2, n):
+            if not _reuse_known_fitness(c, next_pop, next_fitness, pop, fitness):
+                next_fitness[c] = fit.genome_fitness_njit(next_pop[c], xyz, joins_next, fmap, ws)
+                counters[2] += 1
         # line 13
         pop[:] = next_pop
         fitness[:] = next_fitness
@@ -205,7 +241,7 @@ def run_ga(
     ops.initialize_population(start, ops.INIT_LIMITS, rng, pop)
     fitness = np.empty(n)
     fit.population_fitness_njit(pop, arrays.xyz, arrays.joins_next, fmap, ws, fitness, 0)
-    counters = np.array([1, 1], dtype=np.int64)
+    counters = np.array([1, 1, n], dtype=np.int64)
     best = np.array([fitness.max()])
     histories = [best.copy()]
 
@@ -272,4 +308,5 @@ def run_ga(
         best_history=best_history,
         population=pop[order].copy(),
         population_fitness=fitness[order].copy(),
+        fitness_evaluations=int(counters[2]),
     )
