@@ -55,7 +55,7 @@ def claim(
 ) -> ClaimedJob | None:
     """Atomically take the oldest claimable job (queued, or running with an expired lease)."""
     now = now or utcnow()
-    with Session(write_engine(engine)) as session, session.begin():
+    with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
         # A job whose worker died on its last attempt will never be retried: fail it with a reason.
         session.execute(
             update(Job)
@@ -167,7 +167,7 @@ def finish_success(
     replace the camera of a newer one. Raises LeaseLost (and stores nothing) if the job is not ours.
     """
     now = now or utcnow()
-    with Session(write_engine(engine)) as session, session.begin():
+    with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
         result = session.execute(
             update(Job)
             .where(_owned_running(job.id, worker_id))
@@ -217,7 +217,7 @@ def finish_failure(
     """Record an error. Retryable errors requeue the job while attempts remain; returns the new
     status ("queued" or "failed"). Raises LeaseLost if the job is not ours."""
     now = now or utcnow()
-    with Session(write_engine(engine)) as session, session.begin():
+    with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
         row = session.execute(
             select(Job.attempts, Job.max_attempts).where(_owned_running(job_id, worker_id))
         ).first()
@@ -252,7 +252,7 @@ def finish_failure(
 def release(engine: Engine, job_id: str, worker_id: str, now: datetime | None = None) -> bool:
     """Give a job back to the queue without counting the attempt (worker shutting down)."""
     now = now or utcnow()
-    with Session(write_engine(engine)) as session, session.begin():
+    with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
         result = session.execute(
             update(Job)
             .where(_owned_running(job_id, worker_id))

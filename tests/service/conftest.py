@@ -109,3 +109,57 @@ def auth(settings: Settings) -> dict[str, str]:
 @pytest.fixture
 def other_auth(settings: Settings) -> dict[str, str]:
     return {"Authorization": f"Bearer {new_key(settings, 'tenant-b')}"}
+
+
+POSTGRES_ADMIN_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
+
+
+def _postgres_reachable() -> str | None:
+    """None if the test PostgreSQL answers, else why not."""
+    import sqlalchemy as sa
+
+    engine = sa.create_engine(POSTGRES_ADMIN_URL, connect_args={"connect_timeout": 3})
+    try:
+        with engine.connect() as conn:
+            conn.execute(sa.text("SELECT 1"))
+        return None
+    except Exception as exc:
+        return f"PostgreSQL at 127.0.0.1:5432/test unreachable: {type(exc).__name__}: {exc}"
+    finally:
+        engine.dispose()
+
+
+@contextlib.contextmanager
+def postgres_schema() -> Iterator[str]:
+    """A fresh schema for this test, dropped afterwards; yields a DATABASE_URL that uses it."""
+    import uuid
+
+    import sqlalchemy as sa
+
+    reason = _postgres_reachable()
+    if reason is not None:
+        pytest.skip(reason)
+    schema = f"squashcal_test_{uuid.uuid4().hex[:12]}"
+    admin = sa.create_engine(POSTGRES_ADMIN_URL)
+    with admin.begin() as conn:
+        conn.execute(sa.text(f'CREATE SCHEMA "{schema}"'))
+    try:
+        yield f"{POSTGRES_ADMIN_URL}?options=-csearch_path%3D{schema}"
+    finally:
+        with admin.begin() as conn:
+            conn.execute(sa.text(f'DROP SCHEMA "{schema}" CASCADE'))
+        admin.dispose()
+
+
+@pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
+def any_db_settings(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Settings]:
+    """Migrated settings on SQLite and (marked `postgres`) on a throwaway PostgreSQL schema."""
+    if request.param == "sqlite":
+        s = make_settings(tmp_path / "data")
+        upgrade_head(s)
+        yield s
+        return
+    with postgres_schema() as url:
+        s = make_settings(tmp_path / "data", database_url=url)
+        upgrade_head(s)
+        yield s

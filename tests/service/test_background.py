@@ -1,0 +1,112 @@
+"""Player-free background from frames, and sampling frames over a clip."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from app.calib import background, synthetic
+from worker import media as worker_media
+
+SIZE = (480, 270)
+
+
+@pytest.fixture(scope="module")
+def clip() -> tuple[list[np.ndarray], np.ndarray]:
+    genome = synthetic.typical_target_camera(SIZE)
+    frames = synthetic.render_clip_frames(genome, SIZE, 9, 11, n_players=2)
+    truth = synthetic.render_court_image(genome, SIZE, rng=11)
+    return frames, truth
+
+
+def test_one_frame_is_its_own_background() -> None:
+    frame = np.random.default_rng(0).integers(0, 255, (20, 30, 3), dtype=np.uint8)
+    bg, mask = background.background_from_frames([frame])
+    np.testing.assert_array_equal(bg, frame)
+    assert mask.shape == (20, 30) and mask.dtype == np.uint8 and not mask.any()
+
+
+@pytest.mark.parametrize("method", background.METHODS)
+def test_players_are_removed(clip, method: str) -> None:
+    frames, truth = clip
+    touched = np.zeros(truth.shape[:2], bool)
+    for frame in frames:
+        touched |= cv2.absdiff(frame, truth).max(axis=2) > 0
+    assert touched.mean() > 0.005  # the players really cover something
+    bg, mask = background.background_from_frames(frames, method=method)
+    error = cv2.absdiff(bg, truth).max(axis=2)
+    assert error[touched].mean() < 1.0
+    assert (error[touched] > 10).mean() < 0.01
+    # players only crossed these pixels: the background is trusted almost everywhere
+    assert (mask > 0).mean() < 0.02
+    # while the frames themselves are far from the truth where players are
+    assert cv2.absdiff(frames[0], truth).max(axis=2)[touched].mean() > 5
+
+
+def test_mask_marks_where_a_player_lingered_not_where_one_passed() -> None:
+    rng = np.random.default_rng(3)
+    base = rng.integers(60, 200, (120, 160, 3), dtype=np.uint8)
+    frames = [base.copy() for _ in range(9)]
+    for frame in frames[:6]:  # standing still in 6 of 9 frames: the median shows the player
+        frame[20:50, 20:40] = (20, 20, 160)
+    frames[7][70:100, 100:120] = (10, 120, 10)  # crossing once
+    for method in background.METHODS:
+        bg, mask = background.background_from_frames(frames, method=method)
+        assert mask[30:40, 25:35].all(), method
+        assert not mask[75:95, 105:115].any(), method
+        np.testing.assert_array_equal(bg[70:100, 100:120], base[70:100, 100:120])
+
+
+def test_frames_must_agree_in_size_and_type() -> None:
+    a = np.zeros((10, 10, 3), np.uint8)
+    with pytest.raises(ValueError, match="one size"):
+        background.background_from_frames([a, np.zeros((10, 12, 3), np.uint8)])
+    with pytest.raises(ValueError, match="uint8"):
+        background.background_from_frames([a.astype(np.float32)])
+    with pytest.raises(ValueError, match="at least one"):
+        background.background_from_frames([])
+    with pytest.raises(ValueError, match="unknown background method"):
+        background.background_from_frames([a, a], method="mode")
+
+
+def test_frame_indices_span_the_clip() -> None:
+    np.testing.assert_array_equal(worker_media.frame_indices(101, 5), [0, 25, 50, 75, 100])
+    np.testing.assert_array_equal(worker_media.frame_indices(3, 15), [0, 1, 2])
+
+
+def _numbered_clip(tmp_path: Path, n_frames: int) -> Path:
+    """Frame i is a flat grey of brightness i (so a decoded frame tells which one it is)."""
+    frames = [np.full((48, 64, 3), i, np.uint8) for i in range(n_frames)]
+    path = tmp_path / "numbered.mp4"
+    synthetic.write_video(frames, path)
+    return path
+
+
+def test_video_frames_are_sampled_over_the_whole_clip(tmp_path: Path) -> None:
+    path = _numbered_clip(tmp_path, 200)
+    frames = worker_media.sample_video_frames(path, 5, max_duration_s=60, max_size=(100, 100))
+    brightness = [float(f.mean()) for f in frames]
+    # codecs shift flat greys by a few levels; samples are 50 frames apart
+    np.testing.assert_allclose(brightness, [0, 50, 100, 149, 199], atol=6)
+
+
+def test_sequential_fallback_keeps_a_spread_sample(tmp_path: Path) -> None:
+    path = _numbered_clip(tmp_path, 200)
+    capture = cv2.VideoCapture(str(path))
+    try:
+        frames = worker_media._read_sequentially(capture, 5, max_duration_s=60, fps=25)
+    finally:
+        capture.release()
+    brightness = np.array([float(f.mean()) for f in frames])
+    assert len(frames) == 5
+    assert brightness[0] < 3 and brightness[-1] > 150
+    assert np.all(np.diff(brightness) > 20)
+
+
+def test_duration_limit_applies_when_sampling(tmp_path: Path) -> None:
+    path = _numbered_clip(tmp_path, 200)  # 8 s at 25 fps
+    frames = worker_media.sample_video_frames(path, 3, max_duration_s=2.0, max_size=(100, 100))
+    assert max(float(f.mean()) for f in frames) < 55  # nothing after 2 s (frame 50)

@@ -1,0 +1,171 @@
+"""The /project hot path does no database work, and still sees new calibrations."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+from sqlalchemy import event
+
+from app.api.camera_cache import CameraCache
+from app.calib import camera, synthetic
+from app.db import queue, repo
+from app.db.migrate import upgrade_head
+from app.db.models import Calibration, new_id
+from app.db.session import make_engine, make_sessionmaker
+from app.main import create_app
+from app.settings import Settings
+from tests.service.conftest import api_client, make_settings
+
+SIZE = (1280, 720)
+
+
+def calibrate_directly(engine, tenant_id: str, court_id: str, genome: np.ndarray) -> str:
+    """Store a calibration of `genome` through the queue, as the worker does (known camera)."""
+    with make_sessionmaker(engine).begin() as session:
+        repo.new_job(
+            session,
+            job_id=new_id(),
+            tenant_id=tenant_id,
+            court_id=court_id,
+            media_kind="images",
+            media_files=[],
+            params={},
+            max_attempts=3,
+        )
+    job = queue.claim(engine, "w", 60)
+    assert job is not None
+    cal = Calibration(
+        id=new_id(),
+        tenant_id=tenant_id,
+        court_id=court_id,
+        job_id=job.id,
+        spec="wsf",
+        genome=[float(v) for v in genome],
+        opencv=camera.to_opencv(genome, SIZE),
+        fitness=1.0,
+        quality={},
+        result={},
+        image_width=SIZE[0],
+        image_height=SIZE[1],
+    )
+    queue.finish_success(engine, job, "w", cal, {})
+    return cal.id
+
+
+class StatementCounter:
+    def __init__(self, engine) -> None:
+        self.count = 0
+        event.listen(engine, "before_cursor_execute", self._on_execute)
+
+    def _on_execute(self, *args, **kwargs) -> None:
+        self.count += 1
+
+
+def setup_court(settings: Settings) -> tuple[str, str, str]:
+    engine = make_engine(settings)
+    with make_sessionmaker(engine).begin() as session:
+        key_row, key = repo.create_api_key(session, name="t")
+        court = repo.create_court(session, key_row.tenant_id, "c", "wsf")
+        tenant_id, court_id = key_row.tenant_id, court.id
+    engine.dispose()
+    return key, tenant_id, court_id
+
+
+def test_cache_reads_no_database_and_refresh_picks_up_new_calibration(tmp_path: Path) -> None:
+    settings = make_settings(tmp_path / "data")
+    upgrade_head(settings)
+    _, tenant_id, court_id = setup_court(settings)
+    engine = make_engine(settings)
+    counter = StatementCounter(engine)
+    cache = CameraCache(make_sessionmaker(engine), refresh_s=3600, max_courts=10)
+
+    first = cache.get(tenant_id, court_id)  # cold: loads from the database
+    assert first.calibration_id is None and first.genome is None
+    loaded = counter.count
+    assert loaded > 0
+    for _ in range(50):
+        assert cache.get(tenant_id, court_id) is not None
+    assert counter.count == loaded  # warm: no database work at all
+
+    genome = synthetic.typical_target_camera(SIZE)
+    cal_id = calibrate_directly(engine, tenant_id, court_id, genome)
+    assert cache.get(tenant_id, court_id).calibration_id is None  # not yet refreshed
+    assert cache.refresh_once() == 1
+    entry = cache.get(tenant_id, court_id)
+    assert entry.calibration_id == cal_id
+    assert entry.genome is not None
+    np.testing.assert_array_equal(entry.genome, genome)
+    assert cache.refresh_once() == 0  # nothing changed since
+    engine.dispose()
+
+
+def test_cache_is_bounded(tmp_path: Path) -> None:
+    settings = make_settings(tmp_path / "data")
+    upgrade_head(settings)
+    engine = make_engine(settings)
+    with make_sessionmaker(engine).begin() as session:
+        key_row, _ = repo.create_api_key(session, name="t")
+        court_ids = [
+            repo.create_court(session, key_row.tenant_id, f"c{i}", "wsf").id for i in range(5)
+        ]
+    cache = CameraCache(make_sessionmaker(engine), refresh_s=3600, max_courts=3)
+    for court_id in court_ids:
+        cache.get(key_row.tenant_id, court_id)
+    counter = StatementCounter(engine)
+    cache.get(key_row.tenant_id, court_ids[-1])
+    assert counter.count == 0
+    cache.get(key_row.tenant_id, court_ids[0])  # evicted: loaded again
+    assert counter.count > 0
+    engine.dispose()
+
+
+def test_project_hot_path_does_no_database_work(tmp_path: Path) -> None:
+    settings = make_settings(tmp_path / "data", auth_cache_s=60, camera_refresh_s=0.05)
+    upgrade_head(settings)
+    key, tenant_id, court_id = setup_court(settings)
+    auth = {"Authorization": f"Bearer {key}"}
+    genome = synthetic.typical_target_camera(SIZE)
+    floor = np.array([[3.2, 5.44], [1.0, 8.0], [5.5, 2.0]])
+    pixels = camera.floor_to_pixel(genome, floor)
+    app = create_app(settings)
+    state = app.state.squashcal
+    with api_client(app) as client:
+        cal_id = calibrate_directly(state.engine, tenant_id, court_id, genome)
+        body = {"court_id": court_id, "pixels": pixels.tolist()}
+        first = client.post("/project", json=body, headers=auth).json()
+        assert first["calibration_id"] == cal_id
+        np.testing.assert_allclose(first["points"], floor, atol=1e-6)
+        # stop the background refresher's polling from counting: measure requests only
+        state.cameras.refresh_s = 3600
+        time.sleep(0.2)
+        counter = StatementCounter(state.engine)
+        for _ in range(20):
+            assert client.post("/project", json=body, headers=auth).status_code == 200
+        assert counter.count == 0
+
+
+def test_project_answers_null_where_the_ray_misses(tmp_path: Path) -> None:
+    settings = make_settings(tmp_path / "data", auth_cache_s=0)
+    upgrade_head(settings)
+    key, tenant_id, court_id = setup_court(settings)
+    auth = {"Authorization": f"Bearer {key}"}
+    genome = synthetic.typical_target_camera(SIZE)
+    app = create_app(settings)
+    with api_client(app) as client:
+        cal_id = calibrate_directly(app.state.squashcal.engine, tenant_id, court_id, genome)
+        inside = camera.floor_to_pixel(genome, np.array([[3.2, 5.44]]))[0]
+        outside = camera.floor_to_pixel(genome, np.array([[-1.0, 5.0]]))[0]
+        sky = [640.0, -5000.0]  # far above the horizon: the ray never meets the floor
+        body = {"court_id": court_id, "pixels": [inside.tolist(), outside.tolist(), sky]}
+        got = client.post("/project", json=body, headers=auth).json()
+        assert got["calibration_id"] == cal_id
+        assert got["points"][2] is None
+        np.testing.assert_allclose(got["points"][0], [3.2, 5.44], atol=1e-6)
+        np.testing.assert_allclose(got["points"][1], [-1.0, 5.0], atol=1e-6)
+        assert got["inside_court"] == [True, False, False]
+        many = {"court_id": court_id, "pixels": [inside.tolist()] * 100_000}
+        response = client.post("/project", json=many, headers=auth)
+        assert response.status_code == 200
+        assert len(response.json()["points"]) == 100_000

@@ -1,0 +1,208 @@
+"""The jobs table as a queue, on SQLite and PostgreSQL: atomic claims, leases, retries, finishing."""
+
+from __future__ import annotations
+
+import threading
+from datetime import timedelta
+
+import pytest
+from sqlalchemy import select
+
+from app.db import queue, repo
+from app.db.models import Calibration, Court, Job, new_id, utcnow
+from app.db.session import make_engine, make_sessionmaker
+from app.settings import Settings
+
+
+@pytest.fixture
+def engine(any_db_settings: Settings):
+    eng = make_engine(any_db_settings)
+    yield eng
+    eng.dispose()
+
+
+def add_jobs(engine, n: int, max_attempts: int = 3) -> tuple[str, list[str]]:
+    """One tenant, one court, `n` queued jobs created one after another; -> (court id, job ids)."""
+    job_ids = []
+    with make_sessionmaker(engine).begin() as session:
+        key_row, _ = repo.create_api_key(session, name="t")
+        court = repo.create_court(session, key_row.tenant_id, "c", "wsf")
+        court_id = court.id
+        base = utcnow()
+        for i in range(n):
+            job = repo.new_job(
+                session,
+                job_id=new_id(),
+                tenant_id=key_row.tenant_id,
+                court_id=court_id,
+                media_kind="images",
+                media_files=["000.png"],
+                params={"seed": i},
+                max_attempts=max_attempts,
+            )
+            job.created_at = base + timedelta(milliseconds=i)
+            job_ids.append(job.id)
+    return court_id, job_ids
+
+
+def job_row(engine, job_id: str) -> Job:
+    with make_sessionmaker(engine)() as session:
+        job = session.get(Job, job_id)
+        assert job is not None
+        return job
+
+
+def make_calibration(job: queue.ClaimedJob) -> Calibration:
+    return Calibration(
+        id=new_id(),
+        tenant_id=job.tenant_id,
+        court_id=job.court_id,
+        job_id=job.id,
+        spec=job.spec,
+        genome=[0.0] * 15,
+        opencv={},
+        fitness=1.0,
+        quality={},
+        result={},
+        image_width=64,
+        image_height=48,
+    )
+
+
+def test_claims_oldest_first_and_only_once(engine) -> None:
+    _, ids = add_jobs(engine, 2)
+    first = queue.claim(engine, "w1", lease_s=60)
+    second = queue.claim(engine, "w2", lease_s=60)
+    assert first is not None and second is not None
+    assert (first.id, second.id) == (ids[0], ids[1])
+    assert first.attempt == 1 and first.spec == "wsf" and first.params == {"seed": 0}
+    assert queue.claim(engine, "w3", lease_s=60) is None
+    row = job_row(engine, ids[0])
+    assert (row.status, row.worker_id, row.attempts) == ("running", "w1", 1)
+    assert row.lease_expires_at is not None and row.lease_expires_at > utcnow()
+
+
+def test_concurrent_claims_never_share_a_job(engine) -> None:
+    _, ids = add_jobs(engine, 12)
+    claimed: list[str] = []
+    lock = threading.Lock()
+    errors: list[BaseException] = []
+
+    def worker(name: str) -> None:
+        try:
+            while True:
+                job = queue.claim(engine, name, lease_s=60)
+                if job is None:
+                    return
+                with lock:
+                    claimed.append(job.id)
+        except BaseException as exc:  # surfaced below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=worker, args=(f"w{i}",)) for i in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert errors == []
+    assert sorted(claimed) == sorted(ids)  # each exactly once
+
+
+def test_expired_lease_is_reclaimed_and_the_old_worker_is_fenced_off(engine) -> None:
+    _, [job_id] = add_jobs(engine, 1)
+    old = queue.claim(engine, "old", lease_s=60)
+    assert old is not None
+    assert queue.claim(engine, "new", lease_s=60) is None
+    later = utcnow() + timedelta(seconds=61)
+    new = queue.claim(engine, "new", lease_s=60, now=later)
+    assert new is not None and new.id == job_id and new.attempt == 2
+    # the stalled worker wakes up: its heartbeat, failure and success all fail to apply
+    assert not queue.heartbeat(engine, job_id, "old", lease_s=60)
+    with pytest.raises(queue.LeaseLost):
+        queue.finish_failure(engine, job_id, "old", "x", "y", retryable=True)
+    with pytest.raises(queue.LeaseLost):
+        queue.finish_success(engine, old, "old", make_calibration(old), {})
+    with make_sessionmaker(engine)() as session:
+        assert session.scalars(select(Calibration)).all() == []
+    assert queue.heartbeat(engine, job_id, "new", lease_s=60)
+    queue.finish_success(engine, new, "new", make_calibration(new), {"total": 1.0})
+    row = job_row(engine, job_id)
+    assert (row.status, row.attempts, row.progress, row.worker_id) == ("succeeded", 2, 1.0, "new")
+
+
+def test_heartbeat_extends_the_lease_and_writes_progress(engine) -> None:
+    _, [job_id] = add_jobs(engine, 1)
+    job = queue.claim(engine, "w", lease_s=5)
+    assert job is not None
+    later = utcnow() + timedelta(seconds=4)
+    progress = queue.Progress(stage="optimising", progress=0.5, generation=120, best_fitness=3.5)
+    assert queue.heartbeat(engine, job_id, "w", lease_s=5, progress=progress, now=later)
+    # not claimable at 6 s: the heartbeat at 4 s moved the expiry to 9 s
+    assert queue.claim(engine, "x", lease_s=5, now=later + timedelta(seconds=2)) is None
+    row = job_row(engine, job_id)
+    assert (row.stage, row.progress, row.generation, row.best_fitness) == (
+        "optimising",
+        0.5,
+        120,
+        3.5,
+    )
+
+
+def test_retryable_failures_requeue_until_max_attempts(engine) -> None:
+    _, [job_id] = add_jobs(engine, 1, max_attempts=3)
+    for attempt in (1, 2, 3):
+        job = queue.claim(engine, "w", lease_s=60)
+        assert job is not None and job.attempt == attempt
+        status = queue.finish_failure(engine, job_id, "w", "boom", f"failure {attempt}", True)
+        assert status == ("failed" if attempt == 3 else "queued")
+    assert queue.claim(engine, "w", lease_s=60) is None
+    row = job_row(engine, job_id)
+    assert (row.status, row.error_code, row.error_message) == ("failed", "boom", "failure 3")
+    assert row.finished_at is not None
+
+
+def test_non_retryable_failure_fails_at_once(engine) -> None:
+    _, [job_id] = add_jobs(engine, 1)
+    assert queue.claim(engine, "w", lease_s=60) is not None
+    status = queue.finish_failure(engine, job_id, "w", "court_not_found", "no court", False)
+    assert status == "failed"
+    assert queue.claim(engine, "w", lease_s=60) is None
+
+
+def test_worker_lost_on_every_attempt_fails_the_job(engine) -> None:
+    _, [job_id] = add_jobs(engine, 1, max_attempts=2)
+    now = utcnow()
+    assert queue.claim(engine, "a", lease_s=10, now=now) is not None
+    now += timedelta(seconds=11)
+    assert queue.claim(engine, "b", lease_s=10, now=now) is not None
+    now += timedelta(seconds=11)
+    assert queue.claim(engine, "c", lease_s=10, now=now) is None
+    row = job_row(engine, job_id)
+    assert (row.status, row.error_code, row.attempts) == ("failed", "worker_lost", 2)
+
+
+def test_release_gives_the_job_back_without_using_an_attempt(engine) -> None:
+    _, [job_id] = add_jobs(engine, 1)
+    assert queue.claim(engine, "w", lease_s=60) is not None
+    assert queue.release(engine, job_id, "w")
+    assert not queue.release(engine, job_id, "w")  # only from the running state
+    row = job_row(engine, job_id)
+    assert (row.status, row.attempts, row.worker_id) == ("queued", 0, None)
+    again = queue.claim(engine, "v", lease_s=60)
+    assert again is not None and again.attempt == 1
+
+
+def test_newest_upload_stays_the_active_camera(engine) -> None:
+    court_id, [older_id, newer_id] = add_jobs(engine, 2)
+    older = queue.claim(engine, "w1", lease_s=60)
+    newer = queue.claim(engine, "w2", lease_s=60)
+    assert older is not None and newer is not None and older.id == older_id
+    newer_cal = make_calibration(newer)
+    queue.finish_success(engine, newer, "w2", newer_cal, {})
+    older_cal = make_calibration(older)
+    queue.finish_success(engine, older, "w1", older_cal, {})  # finishes last
+    with make_sessionmaker(engine)() as session:
+        court = session.get(Court, court_id)
+        assert court is not None and court.active_calibration_id == newer_cal.id
+        assert len(session.scalars(select(Calibration)).all()) == 2
+    assert job_row(engine, newer_id).calibration_id == newer_cal.id

@@ -1,0 +1,182 @@
+"""The worker in-process with the real pipeline: success, camera cache refresh, failures."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import cv2
+import httpx
+import numpy as np
+import pytest
+
+from app.calib import camera, synthetic
+from app.db import media, queue
+from app.db.migrate import upgrade_head
+from app.db.session import make_engine
+from app.main import create_app
+from app.settings import Settings
+from tests.service.conftest import api_client, make_settings, new_key
+from tests.service.helpers import court_clip_bytes, files
+from tests.service.test_api import assert_error, make_court
+from worker.main import Shutdown, process_job
+
+SIZE = (960, 540)
+MID_COURT_M = np.array([[3.2, 5.44], [2.0, 4.5], [4.4, 6.5], [3.2, 7.5]])
+
+
+def run_one_job(settings: Settings) -> str:
+    engine = make_engine(settings)
+    try:
+        job = queue.claim(engine, "test-worker", settings.lease_s)
+        assert job is not None
+        return process_job(engine, settings, job, "test-worker", Shutdown(threading.Event()))
+    finally:
+        engine.dispose()
+
+
+@pytest.fixture
+def worker_settings(tmp_path: Path) -> Settings:
+    settings = make_settings(
+        tmp_path / "data",
+        camera_refresh_s=0.05,
+        ga_time_budget_s=3.0,
+        background_frames=7,
+        progress_interval_s=0.1,
+    )
+    upgrade_head(settings)
+    return settings
+
+
+def png_frames(genome: np.ndarray, n: int, seed: int) -> list[bytes]:
+    frames = synthetic.render_clip_frames(genome, SIZE, n, seed, n_players=2)
+    return [cv2.imencode(".png", f)[1].tobytes() for f in frames]
+
+
+def wait_for_calibration(
+    client: httpx.Client, auth: dict[str, str], court_id: str, calibration_id: str
+) -> dict:
+    deadline = time.monotonic() + 10
+    while True:
+        body = client.post(
+            "/project", json={"court_id": court_id, "pixels": [[480, 300]]}, headers=auth
+        ).json()
+        if body.get("calibration_id") == calibration_id or time.monotonic() > deadline:
+            return body
+        time.sleep(0.02)
+
+
+def test_calibrations_replace_the_cached_camera(worker_settings: Settings, tmp_path: Path) -> None:
+    auth = {"Authorization": f"Bearer {new_key(worker_settings)}"}
+    camera_a = synthetic.typical_target_camera(SIZE)
+    camera_b = camera_a.copy()
+    camera_b[camera.GENE["t_x"]] += 0.6  # the camera moved 60 cm sideways and turned a little
+    camera_b[camera.GENE["beta"]] -= 0.04
+    with api_client(create_app(worker_settings)) as client:
+        court_id = make_court(client, auth)
+        clip = court_clip_bytes(tmp_path, camera_a, SIZE, 12, seed=1)
+        job_a = client.post(
+            f"/courts/{court_id}/calibrations", files=files(clip), headers=auth
+        ).json()["job_id"]
+        assert run_one_job(worker_settings) == "succeeded"
+        job = client.get(f"/jobs/{job_a}", headers=auth).json()
+        assert job["status"] == "succeeded" and job["progress"] == 1.0 and job["error"] is None
+        assert job["stage"] == "done" and job["generation"] > 0
+        assert {"background", "calibrate", "storing", "total"} <= set(job["timings_s"])
+        cal_a = job["calibration_id"]
+
+        pixels_a = camera.floor_to_pixel(camera_a, MID_COURT_M)
+        assert wait_for_calibration(client, auth, court_id, cal_a)["calibration_id"] == cal_a
+        body = client.post(
+            "/project", json={"court_id": court_id, "pixels": pixels_a.tolist()}, headers=auth
+        ).json()
+        assert body["calibration_id"] == cal_a
+        assert body["inside_court"] == [True] * len(MID_COURT_M)
+        error_cm = 100 * np.linalg.norm(np.array(body["points"]) - MID_COURT_M, axis=1)
+        assert error_cm.max() < 5.0, error_cm
+        # the cache is warm now; a second calibration from images of the moved camera
+        images = png_frames(camera_b, 5, seed=2)
+        job_b = client.post(
+            f"/courts/{court_id}/calibrations", files=files(*images), headers=auth
+        ).json()["job_id"]
+        assert run_one_job(worker_settings) == "succeeded"
+        cal_b = client.get(f"/jobs/{job_b}", headers=auth).json()["calibration_id"]
+        assert cal_b != cal_a
+        body = wait_for_calibration(client, auth, court_id, cal_b)
+        assert body["calibration_id"] == cal_b
+        pixels_b = camera.floor_to_pixel(camera_b, MID_COURT_M)
+        body = client.post(
+            "/project", json={"court_id": court_id, "pixels": pixels_b.tolist()}, headers=auth
+        ).json()
+        error_cm = 100 * np.linalg.norm(np.array(body["points"]) - MID_COURT_M, axis=1)
+        assert error_cm.max() < 5.0, error_cm
+        assert np.abs(pixels_a - pixels_b).max() > 20  # the two cameras really differ
+
+        # the inverse goes through the same cached camera
+        back = client.post(
+            f"/courts/{court_id}/image-points",
+            json={"points": MID_COURT_M.tolist() + [[3.2, 30.0]]},
+            headers=auth,
+        ).json()
+        assert back["calibration_id"] == cal_b
+        np.testing.assert_allclose(np.array(back["pixels"][:4]), pixels_b, atol=3.0)
+        assert back["in_image"][:4] == [True] * 4
+
+        active = client.get(f"/courts/{court_id}/camera", headers=auth).json()
+        assert active["id"] == cal_b and active["active"] and active["job_id"] == job_b
+        assert active["opencv"]["image_size"] == list(SIZE)
+        old = client.get(f"/calibrations/{cal_a}", headers=auth).json()
+        assert old["id"] == cal_a and not old["active"]
+        listed = client.get(f"/courts/{court_id}/calibrations", headers=auth).json()
+        assert [c["id"] for c in listed["calibrations"]] == [cal_b, cal_a]
+        for name in ("background.png", "overlay.png"):
+            response = client.get(f"/calibrations/{cal_a}/{name}", headers=auth)
+            assert response.status_code == 200
+            assert response.headers["content-type"] == "image/png"
+            image = cv2.imdecode(np.frombuffer(response.content, np.uint8), cv2.IMREAD_COLOR)
+            assert image.shape == (SIZE[1], SIZE[0], 3)
+
+
+def test_image_without_a_court_fails_as_court_not_found(
+    worker_settings: Settings, tmp_path: Path
+) -> None:
+    auth = {"Authorization": f"Bearer {new_key(worker_settings)}"}
+    rng = np.random.default_rng(0)
+    image = cv2.GaussianBlur(rng.integers(0, 255, (SIZE[1], SIZE[0], 3), dtype=np.uint8), (0, 0), 3)
+    for _ in range(30):  # blocks with straight edges, but no court
+        x, y = (int(v) for v in rng.integers(0, [SIZE[0] - 60, SIZE[1] - 60]))
+        w, h = (int(v) for v in rng.integers(20, 200, 2))
+        colour = tuple(int(c) for c in rng.integers(0, 255, 3))
+        cv2.rectangle(image, (x, y), (x + w, y + h), colour, -1)
+    with api_client(create_app(worker_settings)) as client:
+        court_id = make_court(client, auth)
+        png = cv2.imencode(".png", image)[1].tobytes()
+        job_id = client.post(
+            f"/courts/{court_id}/calibrations", files=files(png), headers=auth
+        ).json()["job_id"]
+        assert run_one_job(worker_settings) == "failed"
+        job = client.get(f"/jobs/{job_id}", headers=auth).json()
+        assert job["status"] == "failed" and job["attempts"] == 1
+        assert job["error"]["code"] == "court_not_found"
+        assert "court" in job["error"]["message"]
+        assert job["calibration_id"] is None
+        assert_error(client.get(f"/courts/{court_id}/camera", headers=auth), 404, "no_calibration")
+    assert not (worker_settings.media_dir / "calibrations").exists() or not any(
+        (worker_settings.media_dir / "calibrations").iterdir()
+    )
+
+
+def test_lost_media_fails_with_a_specific_code(worker_settings: Settings) -> None:
+    auth = {"Authorization": f"Bearer {new_key(worker_settings)}"}
+    with api_client(create_app(worker_settings)) as client:
+        court_id = make_court(client, auth)
+        png = cv2.imencode(".png", np.zeros((48, 64, 3), np.uint8))[1].tobytes()
+        job_id = client.post(
+            f"/courts/{court_id}/calibrations", files=files(png), headers=auth
+        ).json()["job_id"]
+        for path in media.job_dir(worker_settings, job_id).iterdir():
+            path.unlink()
+        assert run_one_job(worker_settings) == "failed"
+        job = client.get(f"/jobs/{job_id}", headers=auth).json()
+        assert job["error"]["code"] == "media_missing"
