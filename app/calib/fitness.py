@@ -195,6 +195,8 @@ def sample_arrays(samples: LineSamples) -> SampleArrays:
     offsets = np.asarray(samples.offsets, dtype=np.int64)
     if points.ndim != 2 or points.shape[1] != 3 or offsets.ndim != 1 or offsets[-1] != len(points):
         raise ValueError("samples must hold points (M, 3) and offsets (E + 1,) ending at M")
+    if len(points) < 2:
+        raise ValueError("samples must hold at least one edge (two points)")
     joins = np.ones(len(points))
     joins[offsets[1:] - 1] = 0.0
     return SampleArrays(np.ascontiguousarray(points.T), joins)
