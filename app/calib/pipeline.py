@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import cv2
@@ -52,16 +52,21 @@ class CalibrationResult:
     bundle: str
     spec: str
     stop_reason: str
-    start_genome: np.ndarray
+    start_genome: np.ndarray  # where the GA started (given, or found by the start search)
+    ga_genome: np.ndarray  # the GA's best camera, before refinement
+    ga_fitness: float
+    refined_from: str  # which camera the refinement started from: "ga", "ga_simple_lens", "start"
     timings_s: dict[str, float]
     quality: dict[str, float]
-    extra: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         return {
             "opencv": camera.to_opencv(self.genome, self.image_size),
             "genome": [float(v) for v in self.genome],
             "start_genome": [float(v) for v in self.start_genome],
+            "ga_genome": [float(v) for v in self.ga_genome],
+            "ga_fitness": float(self.ga_fitness),
+            "refined_from": self.refined_from,
             "fitness": float(self.fitness),
             "generations": int(self.generations),
             "seed": int(self.seed),
@@ -70,7 +75,6 @@ class CalibrationResult:
             "stop_reason": self.stop_reason,
             "timings_s": {k: round(float(v), 6) for k, v in self.timings_s.items()},
             "quality": {k: float(v) for k, v in self.quality.items()},
-            **self.extra,
         }
 
 
@@ -240,7 +244,9 @@ def default_start_genome(image_size: tuple[int, int], spec: str = "wsf") -> np.n
 # refinement and quality: robust chamfer distance of the projected line samples
 
 
-def fitting_samples(model: CourtModel, spacing_m: float) -> tuple[LineSamples, np.ndarray]:
+def fitting_samples(
+    model: CourtModel, spacing_m: float, line_borders: bool = True
+) -> tuple[LineSamples, np.ndarray]:
     """Line samples to fit edges with: painted lines by their two borders, creases as they are.
 
     Canny marks both borders of a painted line (50 mm, several pixels wide near the camera), not
@@ -249,7 +255,9 @@ def fitting_samples(model: CourtModel, spacing_m: float) -> tuple[LineSamples, n
     within its own surface (floor or wall), and each border finds its own edge. Wall/floor and
     wall/wall junctions are brightness steps with one edge on the junction itself.
     Each border is its own run of the returned samples (consecutive samples join up); the
-    second value (R,) gives the court edge each run belongs to.
+    second value (R,) gives the court edge each run belongs to. With `line_borders` False every
+    edge is sampled on its centre line (for edge images drawn that way, e.g. by
+    `render.rasterize_court`).
     """
     base = sample_edges(model, spacing_m)
     half_width = model.spec.line_width_m / 2.0
@@ -259,7 +267,7 @@ def fitting_samples(model: CourtModel, spacing_m: float) -> tuple[LineSamples, n
     for e, (a, b) in enumerate(model.edges):
         points = base.points[base.offsets[e] : base.offsets[e + 1]]
         surfaces = _surfaces_of(model, model.nodes[a], model.nodes[b])
-        if len(surfaces) == 1:
+        if line_borders and len(surfaces) == 1:
             direction = model.nodes[b] - model.nodes[a]
             side = np.cross(direction, surfaces[0])
             side *= half_width / np.linalg.norm(side)
@@ -462,6 +470,32 @@ def lens_folds_in_image(genome: np.ndarray, image_size: tuple[int, int]) -> bool
     return bool(r_fold_distorted < max(border_u, border_v))
 
 
+def court_extent_fraction(
+    genome: np.ndarray, samples: LineSamples, image_size: tuple[int, int]
+) -> float:
+    """Area of the bounding box of the court's visible line samples over the image area."""
+    width, height = image_size
+    pixels, depth = camera.project_points(genome, samples.points)
+    u, v = pixels[:, 0], pixels[:, 1]
+    seen = (depth > MIN_DEPTH_M) & (u >= 0) & (u <= width - 1) & (v >= 0) & (v <= height - 1)
+    if seen.sum() < 2:
+        return 0.0
+    return float(np.ptp(u[seen]) * np.ptp(v[seen])) / float(width * height)
+
+
+# A court seen from where squash is filmed spans a good part of the picture; a camera that
+# shrinks it into a corner can always park it on some edges.
+MIN_COURT_EXTENT = 0.05
+
+
+def plausible(genome: np.ndarray, samples: LineSamples, image_size: tuple[int, int]) -> bool:
+    """A camera worth comparing: its lens does not fold inside the image and the court spans at
+    least MIN_COURT_EXTENT of it."""
+    if lens_folds_in_image(genome, image_size):
+        return False
+    return court_extent_fraction(genome, samples, image_size) >= MIN_COURT_EXTENT
+
+
 def refine_camera(
     genome: np.ndarray,
     samples: LineSamples,
@@ -550,6 +584,11 @@ MIN_COURT_IN_IMAGE = 0.25
 
 def court_not_found_reason(quality: dict[str, float]) -> str | None:
     """Why the fit is not a court (one phrase), or None if it passes the thresholds."""
+    if quality.get("court_extent_fraction", 1.0) < MIN_COURT_EXTENT:
+        return (
+            f"the best camera squeezes the court into {quality['court_extent_fraction']:.1%} of "
+            f"the image (need {MIN_COURT_EXTENT:.0%})"
+        )
     if quality["court_in_image_fraction"] < MIN_COURT_IN_IMAGE:
         return (
             f"only {quality['court_in_image_fraction']:.0%} of the court's lines would be in the "
@@ -575,9 +614,8 @@ def court_not_found_reason(quality: dict[str, float]) -> str | None:
 # percent of the image width) before the best of them seeds the GA.
 START_CANDIDATES_POLISHED = 6
 POLISH_TRUNCATION_FRACTION = 0.03
-# truncation of the robust chamfer residual in the two refinement passes, at 1920 px wide
-MEDIUM_TRUNCATION_AT_1920 = 12.0
-REFINE_TRUNCATION_AT_1920 = 3.0
+# truncation (px at 1920 px wide) of the robust chamfer residual in the refinement passes
+REFINE_TRUNCATIONS_AT_1920 = (60.0, 12.0, 3.0)
 # inlier tolerance for the quality figures, at 1920 px wide (scaled with the width)
 INLIER_PX_AT_1920 = 3.0
 
@@ -609,7 +647,12 @@ def find_start(
     polished = np.array(
         [refine_camera(candidates[i], samples, dmap, ignore, tau, PINHOLE_DIRECTIONS) for i in top]
     )
-    costs = [chamfer_cost(g, samples, dmap, ignore, tau) for g in polished]
+    costs = [
+        chamfer_cost(g, samples, dmap, ignore, tau)
+        if plausible(g, samples, (width, height))
+        else np.inf
+        for g in polished
+    ]
     best = int(np.argmin(costs))
     info = {
         "grid_candidates": float(len(candidates)),
@@ -632,6 +675,22 @@ def simple_lens(genome: np.ndarray) -> np.ndarray:
     return g
 
 
+def refine_fully(
+    genome: np.ndarray,
+    samples: LineSamples,
+    dmap: np.ndarray,
+    ignore: np.ndarray | None,
+    image_size: tuple[int, int],
+) -> np.ndarray:
+    """`refine_camera` with a shrinking truncation (REFINE_TRUNCATIONS_AT_1920, scaled with the
+    image width): wide enough first to pull lines a few pixels off onto their edges, tight at the
+    end so that only the edges on the lines decide the sub-pixel position."""
+    scale = image_size[0] / 1920.0
+    for tau in REFINE_TRUNCATIONS_AT_1920:
+        genome = refine_camera(genome, samples, dmap, ignore, max(tau * scale, 1.5))
+    return genome
+
+
 def refine_best(
     cameras: dict[str, np.ndarray],
     samples: LineSamples,
@@ -639,21 +698,18 @@ def refine_best(
     ignore: np.ndarray | None,
     image_size: tuple[int, int],
 ) -> tuple[np.ndarray, str]:
-    """Refine each named camera (medium then fine truncation) and return the best and its name.
+    """Refine each named camera (`refine_fully`) and return the best and its name.
 
     The GA maximises its own fitness, whose optimum can sit off the court (a lens that folds long
-    projected lines onto clutter scores high); its start is refined too, and the lower chamfer
-    cost among cameras whose lens does not fold inside the image wins.
+    projected lines onto clutter scores high); its start is refined too, and the lowest final
+    chamfer cost among plausible cameras wins.
     """
-    width = image_size[0]
-    medium_px = MEDIUM_TRUNCATION_AT_1920 * width / 1920.0
-    fine_px = max(REFINE_TRUNCATION_AT_1920 * width / 1920.0, 1.5)
+    fine_px = max(REFINE_TRUNCATIONS_AT_1920[-1] * image_size[0] / 1920.0, 1.5)
     best: tuple[float, np.ndarray, str] | None = None
     for name, genome in cameras.items():
-        refined = refine_camera(genome, samples, dmap, ignore, medium_px)
-        refined = refine_camera(refined, samples, dmap, ignore, fine_px)
+        refined = refine_fully(genome, samples, dmap, ignore, image_size)
         cost = chamfer_cost(refined, samples, dmap, ignore, fine_px)
-        if lens_folds_in_image(refined, image_size):
+        if not plausible(refined, samples, image_size):
             cost = np.inf
         if best is None or cost < best[0]:
             best = (cost, refined, name)
@@ -672,7 +728,6 @@ def calibrate(
     spec: str = "wsf",
     moving_mask: np.ndarray | None = None,
     progress: ProgressFn | None = None,
-    refine: bool = True,
 ) -> CalibrationResult:
     """Fit the 15-parameter camera to one image (BGR/BGRA/grey photo, or an edge image).
 
@@ -701,6 +756,7 @@ def calibrate(
             raise ValueError("start camera must be finite numbers")
 
     report("edges", 0.0, {})
+    given_edges = edges.is_edge_image(arr)
     edge_image = prepare_edge_image(arr, moving_mask)
     ignore = moving_mask_of(moving_mask, (width, height)) if moving_mask is not None else None
     edge_fraction = float((edge_image > 0).mean())
@@ -708,7 +764,8 @@ def calibrate(
         raise CourtNotFound("court not found: the image has no edges", {"edge_pixel_fraction": 0.0})
     fmap = bundle_fitness_map(edge_image, bundle_config)
     dmap = distance_map(edge_image)
-    samples, owners = fitting_samples(model, spacing_for_image(width))
+    # an edge image is taken to show line centres; Canny edges of a photo show line borders
+    samples, owners = fitting_samples(model, spacing_for_image(width), not given_edges)
     timings["edges"] = time.perf_counter() - t_start
     report("edges", 1.0, {"edge_pixel_fraction": edge_fraction})
 
@@ -747,23 +804,21 @@ def calibrate(
 
     t0 = time.perf_counter()
     report("refining", 0.0, {})
-    genome = np.asarray(ga.genome, dtype=np.float64).copy()
-    refined_from = "ga"
-    if refine:
-        genome, refined_from = refine_best(
-            {"ga": genome, "ga_simple_lens": simple_lens(genome), "start": start},
-            samples,
-            dmap,
-            ignore,
-            (width, height),
-        )
+    ga_genome = np.asarray(ga.genome, dtype=np.float64).copy()
+    genome, refined_from = refine_best(
+        {"ga": ga_genome, "ga_simple_lens": simple_lens(ga_genome), "start": start},
+        samples,
+        dmap,
+        ignore,
+        (width, height),
+    )
     timings["refine"] = time.perf_counter() - t0
     report("refining", 1.0, {})
 
     inlier_px = INLIER_PX_AT_1920 * max(width, 640) / 1920.0
     quality = fit_quality(genome, samples, owners, dmap, ignore, inlier_px)
     quality["edge_pixel_fraction"] = edge_fraction
-    quality["refined_from_ga"] = float(refined_from == "ga")
+    quality["court_extent_fraction"] = court_extent_fraction(genome, samples, (width, height))
     quality.update(start_info)
     timings["total"] = time.perf_counter() - t_start
     reason = court_not_found_reason(quality)
@@ -780,6 +835,9 @@ def calibrate(
         spec=model.spec.name,
         stop_reason=str(ga.stop_reason),
         start_genome=start,
+        ga_genome=ga_genome,
+        ga_fitness=float(ga.fitness),
+        refined_from=refined_from,
         timings_s=timings,
         quality=quality,
     )
