@@ -70,6 +70,8 @@ def _read_image(path: str) -> Any:
         data = np.fromfile(file, dtype=np.uint8)
     except OSError as exc:
         raise CliError(f"cannot read image {path}: {exc.strerror or exc}") from None
+    # OpenCV logs decoder complaints to stderr itself; the one-line error below says it all
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     if image is None:
         raise CliError(f"not a readable image (corrupt or unsupported format): {path}")
