@@ -27,10 +27,16 @@ def _calibrated(entry: CachedCamera) -> np.ndarray:
     return entry.genome
 
 
-def _pairs_or_null(values: np.ndarray) -> list[list[float] | None]:
+# Output precision: 1 micrometre on the floor, 1/10000 pixel in the image. Far below any camera's
+# accuracy, and short numbers halve the cost of writing 100 000 points as JSON.
+FLOOR_DECIMALS = 6
+PIXEL_DECIMALS = 4
+
+
+def _pairs_or_null(values: np.ndarray, decimals: int) -> list[list[float] | None]:
     """(M, 2) with NaN rows -> JSON-ready list with None for those rows."""
     finite = np.isfinite(values).all(axis=1)
-    rows: list[list[float] | None] = values.tolist()
+    rows: list[list[float] | None] = np.round(values, decimals).tolist()
     for i in np.flatnonzero(~finite):
         rows[i] = None
     return rows
@@ -61,7 +67,7 @@ def project(body: ProjectRequest, state: StateDep, tenant_id: TenantDep) -> Resp
     )
     return _json(
         {
-            "points": _pairs_or_null(floor_xy),
+            "points": _pairs_or_null(floor_xy, FLOOR_DECIMALS),
             "inside_court": inside.tolist(),
             "calibration_id": entry.calibration_id,
         }
@@ -89,7 +95,7 @@ def image_points(
         )
     return _json(
         {
-            "pixels": _pairs_or_null(pixels),
+            "pixels": _pairs_or_null(pixels, PIXEL_DECIMALS),
             "in_image": in_image.tolist(),
             "calibration_id": entry.calibration_id,
         }

@@ -213,3 +213,16 @@ def test_openapi_documents_the_api(client: httpx.Client) -> None:
     assert "multipart/form-data" in upload["requestBody"]["content"]
     assert client.get("/docs").status_code == 200
     assert client.get("/").status_code == 200
+
+
+def test_ready_fails_when_the_database_is_unreachable(tmp_path) -> None:
+    settings = make_settings(
+        tmp_path / "d", database_url="postgresql+psycopg://postgres@127.0.0.1:1/none"
+    )
+    with api_client(create_app(settings)) as client:
+        assert client.get("/healthz").status_code == 200
+        assert_error(client.get("/readyz"), 503, "database_unreachable")
+        # a request needing the database fails cleanly too (no key can be checked)
+        response = client.get("/courts", headers={"Authorization": "Bearer x"})
+        assert_error(response, 503, "database_unavailable")
+        assert response.headers["retry-after"] == "2"

@@ -360,3 +360,33 @@ def test_random_bytes_never_cause_a_server_error(
         assert response.status_code in (202, 413, 415, 422), (i, response.text)
         if response.status_code != 202:
             assert_error(response, response.status_code)
+
+
+def test_size_limit_applies_while_streaming_without_content_length(tmp_path: Path) -> None:
+    from app.db.migrate import upgrade_head
+    from tests.service.conftest import new_key
+
+    settings = make_settings(tmp_path / "d", max_upload_bytes=50_000)
+    upgrade_head(settings)
+    auth = {"Authorization": f"Bearer {new_key(settings)}"}
+    body = (
+        b'--b\r\nContent-Disposition: form-data; name="files"; filename="a.png"\r\n\r\n'
+        + png_bytes(400, 400)  # ~480 kB
+        + b"\r\n--b--\r\n"
+    )
+
+    def chunks():
+        for i in range(0, len(body), 8192):
+            yield body[i : i + 8192]
+
+    with api_client(create_app(settings)) as client:
+        court_id = make_court(client, auth)
+        response = client.post(
+            f"/courts/{court_id}/calibrations",
+            content=chunks(),
+            headers={**auth, "content-type": "multipart/form-data; boundary=b"},
+        )
+        assert "content-length" not in {k.lower() for k in response.request.headers}
+        assert_error(response, 413, "upload_too_large")
+    assert stored_job_dirs(settings) == []
+    assert jobs_in_db(settings) == []
