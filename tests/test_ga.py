@@ -299,6 +299,7 @@ def test_termination_reasons(scene):
     assert timed.stop_reason == "time_budget"
     assert 1 < timed.generations < 10**9
     assert calls and calls[-1] == (timed.generations, timed.fitness)
+    assert len(calls) <= 3  # rate-limited to one call per 0.25 s, plus the final one
     assert all(isinstance(g, int) and isinstance(b, float) for g, b in calls)
     assert [g for g, _ in calls] == sorted(g for g, _ in calls)
 
