@@ -42,6 +42,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             refresher.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await refresher
+            # a refresh already running in its thread outlives the cancelled task: let it end
+            await asyncio.to_thread(state.cameras.wait_idle)
             engine.dispose()
 
     app = FastAPI(

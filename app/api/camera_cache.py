@@ -55,6 +55,7 @@ class CameraCache:
         self.max_courts = max_courts
         self._entries: OrderedDict[str, CachedCamera] = OrderedDict()
         self._lock = threading.Lock()
+        self._refreshing = threading.Lock()  # held while a refresh uses the database
 
     def get(self, tenant_id: str, court_id: str) -> CachedCamera:
         """The court's camera entry; loads it on a miss. Raises repo.NotFound for other tenants."""
@@ -113,6 +114,15 @@ class CameraCache:
 
     def refresh_once(self) -> int:
         """Check every cached court against the database; returns how many cameras changed."""
+        with self._refreshing:
+            return self._refresh()
+
+    def wait_idle(self) -> None:
+        """Block until no refresh is using the database (before the engine is disposed)."""
+        with self._refreshing:
+            pass
+
+    def _refresh(self) -> int:
         with self._lock:
             snapshot = dict(self._entries)
         if not snapshot:

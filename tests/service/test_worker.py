@@ -41,7 +41,6 @@ def worker_settings(tmp_path: Path) -> Settings:
     settings = make_settings(
         tmp_path / "data",
         camera_refresh_s=0.05,
-        ga_time_budget_s=3.0,
         background_frames=7,
         progress_interval_s=0.1,
     )
@@ -180,3 +179,31 @@ def test_lost_media_fails_with_a_specific_code(worker_settings: Settings) -> Non
         assert run_one_job(worker_settings) == "failed"
         job = client.get(f"/jobs/{job_id}", headers=auth).json()
         assert job["error"]["code"] == "media_missing"
+
+
+@pytest.mark.postgres
+def test_upload_to_projection_on_postgres(tmp_path: Path) -> None:
+    from tests.service.conftest import postgres_schema
+
+    with postgres_schema() as url:
+        settings = make_settings(
+            tmp_path / "data", database_url=url, camera_refresh_s=0.05, background_frames=5
+        )
+        upgrade_head(settings)
+        auth = {"Authorization": f"Bearer {new_key(settings)}"}
+        genome = synthetic.typical_target_camera(SIZE)
+        with api_client(create_app(settings)) as client:
+            court_id = make_court(client, auth)
+            images = png_frames(genome, 3, seed=4)
+            job_id = client.post(
+                f"/courts/{court_id}/calibrations", files=files(*images), headers=auth
+            ).json()["job_id"]
+            assert run_one_job(settings) == "succeeded"
+            cal_id = client.get(f"/jobs/{job_id}", headers=auth).json()["calibration_id"]
+            assert wait_for_calibration(client, auth, court_id, cal_id)["calibration_id"] == cal_id
+            pixels = camera.floor_to_pixel(genome, MID_COURT_M)
+            body = client.post(
+                "/project", json={"court_id": court_id, "pixels": pixels.tolist()}, headers=auth
+            ).json()
+            error_cm = 100 * np.linalg.norm(np.array(body["points"]) - MID_COURT_M, axis=1)
+            assert error_cm.max() < 5.0, error_cm
