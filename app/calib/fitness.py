@@ -205,6 +205,8 @@ def sample_arrays(samples: LineSamples) -> SampleArrays:
 class Workspace(NamedTuple):
     """Scratch buffers (M,) for one genome's fitness, reused across a population and generations."""
 
+    u: np.ndarray  # pixel of sample j, NaN if it is behind the camera
+    v: np.ndarray
     u_in: np.ndarray  # pixel of sample j if inside the image, else 0 (index-safe)
     v_in: np.ndarray
     inside: np.ndarray  # 1.0 / 0.0
@@ -216,6 +218,8 @@ class Workspace(NamedTuple):
 @numba.njit(cache=True)
 def make_workspace(n_samples: int) -> Workspace:
     return Workspace(
+        np.empty(n_samples),
+        np.empty(n_samples),
         np.empty(n_samples),
         np.empty(n_samples),
         np.empty(n_samples),
@@ -236,12 +240,15 @@ def _project_samples(g: np.ndarray, xyz: np.ndarray, fmap: np.ndarray, ws: Works
     r, t = ws.r, ws.t
     extrinsics_njit(g, r, t)
     xs, ys, zs = xyz[0], xyz[1], xyz[2]
-    u_in, v_in, inside = ws.u_in, ws.v_in, ws.inside
+    u, v, u_in, v_in, inside = ws.u, ws.v, ws.u_in, ws.v_in, ws.inside
     n_inside = 0
     for j in range(xs.shape[0]):
         pu, pv, pz = project_point_njit(r, t, g, xs[j], ys[j], zs[j])
+        front = pz > MIN_DEPTH_M
         # non-short-circuit `&` keeps this loop branch-free (vectorised); NaN compares False
-        ins = (pz > MIN_DEPTH_M) & (pu >= 0.0) & (pu <= u_max) & (pv >= 0.0) & (pv <= v_max)
+        ins = front & (pu >= 0.0) & (pu <= u_max) & (pv >= 0.0) & (pv <= v_max)
+        u[j] = pu if front else np.nan
+        v[j] = pv if front else np.nan
         u_in[j] = min(pu, u_lim) if ins else 0.0
         v_in[j] = min(pv, v_lim) if ins else 0.0
         inside[j] = 1.0 if ins else 0.0
@@ -271,22 +278,27 @@ def _integrate_inside(joins_next: np.ndarray, fmap: np.ndarray, ws: Workspace) -
 
 
 @numba.njit(cache=True)
-def _integrate_border(
-    g: np.ndarray, xyz: np.ndarray, joins_next: np.ndarray, fmap: np.ndarray, ws: Workspace
-) -> float:
-    """The inside parts of sub-segments with one or both ends outside the image (rare: projected
-    again here rather than stored for every sample in pass 1)."""
+def _integrate_border(joins_next: np.ndarray, fmap: np.ndarray, ws: Workspace) -> float:
+    """The inside parts of sub-segments with one or both ends outside the image."""
     h, w = fmap.shape
     u_max = float(w - 1)
     v_max = float(h - 1)
-    r, t, inside = ws.r, ws.t, ws.inside
+    u, v, inside = ws.u, ws.v, ws.inside
     total = 0.0
-    for j in range(xyz.shape[1] - 1):
-        if joins_next[j] != 0.0 and inside[j] * inside[j + 1] == 0.0:
-            u0, v0, z0 = project_point_njit(r, t, g, xyz[0, j], xyz[1, j], xyz[2, j])
-            u1, v1, z1 = project_point_njit(r, t, g, xyz[0, j + 1], xyz[1, j + 1], xyz[2, j + 1])
-            if z0 > MIN_DEPTH_M and z1 > MIN_DEPTH_M:
-                total += _clipped_segment(fmap, u0, v0, u1, v1, u_max, v_max)
+    for j in range(u.shape[0] - 1):
+        if joins_next[j] == 0.0 or inside[j] * inside[j + 1] != 0.0:
+            continue
+        u0, v0, u1, v1 = u[j], v[j], u[j + 1], v[j + 1]
+        # both ends beyond the same image side: nothing inside (the common case, decided fast)
+        if (
+            (u0 < 0.0 and u1 < 0.0)
+            or (u0 > u_max and u1 > u_max)
+            or (v0 < 0.0 and v1 < 0.0)
+            or (v0 > v_max and v1 > v_max)
+        ):
+            continue
+        # NaN (behind the camera) falls through to here and counts 0 in the clipper
+        total += _clipped_segment(fmap, u0, v0, u1, v1, u_max, v_max)
     return total
 
 
@@ -298,7 +310,7 @@ def genome_fitness_njit(
     n_inside = _project_samples(g, xyz, fmap, ws)
     total = _integrate_inside(joins_next, fmap, ws) if n_inside > 1 else 0.0
     if n_inside < xyz.shape[1]:
-        total += _integrate_border(g, xyz, joins_next, fmap, ws)
+        total += _integrate_border(joins_next, fmap, ws)
     return total
 
 
