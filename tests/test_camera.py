@@ -37,12 +37,16 @@ def test_projection_matches_opencv_to_a_micro_pixel(target_genome):
         assert np.abs(ref[:, 0][front] - px[front]).max() < 1e-6
 
 
-def test_rotation_order_is_rz_ry_rx():
+def test_rotation_order_is_rz_ry_rx_in_the_paper_frame(target_genome):
     a, b, c = 0.3, -0.2, 0.1
     rx = cv2.Rodrigues(np.array([a, 0.0, 0.0]))[0]
     ry = cv2.Rodrigues(np.array([0.0, b, 0.0]))[0]
     rz = cv2.Rodrigues(np.array([0.0, 0.0, c]))[0]
-    assert camera.rotation_matrices(a, b, c) == pytest.approx(rz @ ry @ rx)
+    g = target_genome.copy()
+    g[7:10] = a, b, c
+    r, t = camera.court_extrinsics(g)
+    assert r[0] == pytest.approx(rz @ ry @ rx @ camera.PAPER_FROM_COURT_R, abs=1e-15)
+    assert t[0] == pytest.approx(g[4:7] - r[0] @ camera.PAPER_ORIGIN_COURT_M, abs=1e-14)
     assert camera.angles_from_rotation(rz @ ry @ rx) == pytest.approx((a, b, c))
 
 

@@ -86,18 +86,6 @@ def test_fitness_map_degenerate_images():
     assert np.all(fitness.fitness_map(np.full((3, 4), 255, np.uint8), transformed=False) == 1.0)
 
 
-def test_compiled_extrinsics_match_camera_module(target):
-    rng = np.random.default_rng(3)
-    r_out, t_out = np.empty((3, 3)), np.empty(3)
-    for _ in range(20):
-        g = target.copy()
-        g[4:10] += rng.uniform(-1.0, 1.0, 6)
-        r, t = camera.court_extrinsics(g)
-        fitness.extrinsics_njit(g, r_out, t_out)
-        assert r_out == pytest.approx(r[0], abs=1e-15)
-        assert t_out == pytest.approx(t[0], abs=1e-14)
-
-
 def _chebyshev_inside_reference(
     genome: np.ndarray, samples: court.LineSamples, fmap: np.ndarray, steps: int = 400
 ) -> float:

@@ -63,39 +63,59 @@ def as_population(genomes: np.ndarray) -> np.ndarray:
     return pop
 
 
-def rotation_matrices(alpha: np.ndarray, beta: np.ndarray, gamma: np.ndarray) -> np.ndarray:
-    """R = Rz(gamma) Ry(beta) Rx(alpha) for arrays of angles (...,) -> (..., 3, 3)."""
-    ca, sa = np.cos(alpha), np.sin(alpha)
-    cb, sb = np.cos(beta), np.sin(beta)
-    cg, sg = np.cos(gamma), np.sin(gamma)
-    r = np.empty(np.shape(alpha) + (3, 3))
-    r[..., 0, 0] = cg * cb
-    r[..., 0, 1] = cg * sb * sa - sg * ca
-    r[..., 0, 2] = cg * sb * ca + sg * sa
-    r[..., 1, 0] = sg * cb
-    r[..., 1, 1] = sg * sb * sa + cg * ca
-    r[..., 1, 2] = sg * sb * ca - cg * sa
-    r[..., 2, 0] = -sb
-    r[..., 2, 1] = cb * sa
-    r[..., 2, 2] = cb * ca
-    return r
-
-
 def angles_from_rotation(r: np.ndarray) -> tuple[float, float, float]:
-    """Inverse of `rotation_matrices` for one matrix: (alpha, beta, gamma), beta in [-pi/2, pi/2]."""
+    """Angles of one R = Rz(gamma) Ry(beta) Rx(alpha): (alpha, beta, gamma), beta in [-pi/2, pi/2]."""
     beta = float(np.arcsin(np.clip(-r[2, 0], -1.0, 1.0)))
     alpha = float(np.arctan2(r[2, 1], r[2, 2]))
     gamma = float(np.arctan2(r[1, 0], r[0, 0]))
     return alpha, beta, gamma
 
 
+_PAPER_R = np.ascontiguousarray(PAPER_FROM_COURT_R)
+_PAPER_O = np.ascontiguousarray(PAPER_ORIGIN_COURT_M)
+
+
+@numba.njit(cache=True, inline="always")
+def extrinsics_njit(g: np.ndarray, r: np.ndarray, t: np.ndarray) -> None:
+    """Court-frame extrinsics of one genome, written into r (3, 3) and t (3,): X_cam = r X + t.
+
+    R_paper = Rz(gamma) Ry(beta) Rx(alpha); r = R_paper @ PAPER_FROM_COURT_R and
+    t = t_genome - r @ PAPER_ORIGIN_COURT_M. The one implementation, shared by compiled code
+    (the GA) and `court_extrinsics`.
+    """
+    ca, sa = np.cos(g[7]), np.sin(g[7])
+    cb, sb = np.cos(g[8]), np.sin(g[8])
+    cg, sg = np.cos(g[9]), np.sin(g[9])
+    rp00 = cg * cb
+    rp01 = cg * sb * sa - sg * ca
+    rp02 = cg * sb * ca + sg * sa
+    rp10 = sg * cb
+    rp11 = sg * sb * sa + cg * ca
+    rp12 = sg * sb * ca - cg * sa
+    rp20 = -sb
+    rp21 = cb * sa
+    rp22 = cb * ca
+    for j in range(3):
+        r[0, j] = rp00 * _PAPER_R[0, j] + rp01 * _PAPER_R[1, j] + rp02 * _PAPER_R[2, j]
+        r[1, j] = rp10 * _PAPER_R[0, j] + rp11 * _PAPER_R[1, j] + rp12 * _PAPER_R[2, j]
+        r[2, j] = rp20 * _PAPER_R[0, j] + rp21 * _PAPER_R[1, j] + rp22 * _PAPER_R[2, j]
+    for i in range(3):
+        t[i] = g[4 + i] - (r[i, 0] * _PAPER_O[0] + r[i, 1] * _PAPER_O[1] + r[i, 2] * _PAPER_O[2])
+
+
+@numba.njit(cache=True)
+def _extrinsics_all(pop: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    n = pop.shape[0]
+    r = np.empty((n, 3, 3))
+    t = np.empty((n, 3))
+    for i in range(n):
+        extrinsics_njit(pop[i], r[i], t[i])
+    return r, t
+
+
 def court_extrinsics(genomes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World(court)-to-camera rotation (N, 3, 3) and translation (N, 3): X_cam = R X_court + t."""
-    pop = as_population(genomes)
-    r_paper = rotation_matrices(pop[:, 7], pop[:, 8], pop[:, 9])
-    r_court = r_paper @ PAPER_FROM_COURT_R
-    t_court = pop[:, 4:7] - r_court @ PAPER_ORIGIN_COURT_M
-    return r_court, t_court
+    return _extrinsics_all(np.ascontiguousarray(as_population(genomes)))
 
 
 @numba.njit(cache=True, inline="always")

@@ -16,9 +16,8 @@ import numba
 import numpy as np
 
 from app.calib.camera import (
-    PAPER_FROM_COURT_R,
-    PAPER_ORIGIN_COURT_M,
     as_population,
+    extrinsics_njit,
     project_point_njit,
 )
 from app.calib.court import CourtModel, LineSamples
@@ -30,8 +29,6 @@ MIN_DEPTH_M = 1e-6
 # eq. 13: F = 1 - clip(ln(E + 1) / LOG_SCALE, 0, 1)
 LOG_SCALE = 0.3
 # numba freezes module-level arrays as constants
-_P = np.ascontiguousarray(PAPER_FROM_COURT_R, dtype=np.float64)
-_O = np.ascontiguousarray(PAPER_ORIGIN_COURT_M, dtype=np.float64)
 
 
 def _check_edge_image(edge_image: np.ndarray) -> np.ndarray:
@@ -74,33 +71,6 @@ def fitness_map(edge_image: np.ndarray, transformed: bool = True) -> np.ndarray:
     if transformed:
         f = 2.0 * f - 1.0
     return np.ascontiguousarray(f, dtype=np.float32)
-
-
-@numba.njit(cache=True, inline="always")
-def extrinsics_njit(g: np.ndarray, r: np.ndarray, t: np.ndarray) -> None:
-    """`camera.court_extrinsics` for one genome inside compiled code, written into r (3, 3), t (3,).
-
-    The compiled GA needs R and t without a trip through Python; a test pins it to
-    `court_extrinsics`. The projection itself stays `camera.project_point_njit`.
-    """
-    ca, sa = np.cos(g[7]), np.sin(g[7])
-    cb, sb = np.cos(g[8]), np.sin(g[8])
-    cg, sg = np.cos(g[9]), np.sin(g[9])
-    rp00 = cg * cb
-    rp01 = cg * sb * sa - sg * ca
-    rp02 = cg * sb * ca + sg * sa
-    rp10 = sg * cb
-    rp11 = sg * sb * sa + cg * ca
-    rp12 = sg * sb * ca - cg * sa
-    rp20 = -sb
-    rp21 = cb * sa
-    rp22 = cb * ca
-    for j in range(3):
-        r[0, j] = rp00 * _P[0, j] + rp01 * _P[1, j] + rp02 * _P[2, j]
-        r[1, j] = rp10 * _P[0, j] + rp11 * _P[1, j] + rp12 * _P[2, j]
-        r[2, j] = rp20 * _P[0, j] + rp21 * _P[1, j] + rp22 * _P[2, j]
-    for i in range(3):
-        t[i] = g[4 + i] - (r[i, 0] * _O[0] + r[i, 1] * _O[1] + r[i, 2] * _O[2])
 
 
 @numba.njit(cache=True, inline="always")
