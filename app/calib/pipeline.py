@@ -35,11 +35,18 @@ DEFAULT_MAX_GENERATIONS = 3000
 
 
 class CourtNotFound(Exception):
-    """The image does not show a court the camera could be fitted to; `quality` says why."""
+    """The image does not show a court the camera could be fitted to; `quality` says why and
+    `genome` is the rejected best camera (None if there was nothing to fit), for diagnosis."""
 
-    def __init__(self, message: str, quality: dict[str, float] | None = None) -> None:
+    def __init__(
+        self,
+        message: str,
+        quality: dict[str, float] | None = None,
+        genome: np.ndarray | None = None,
+    ) -> None:
         super().__init__(message)
         self.quality = dict(quality or {})
+        self.genome = None if genome is None else np.asarray(genome, dtype=np.float64).copy()
 
 
 @dataclass(frozen=True)
@@ -311,6 +318,33 @@ def _bilinear(image: np.ndarray, u: float, v: float) -> float:
     return top + fv * (bottom - top)
 
 
+@numba.njit(cache=True, inline="always")
+def _sample_distance(
+    r: np.ndarray,
+    t: np.ndarray,
+    g: np.ndarray,
+    centre: np.ndarray,
+    max_tan2: float,
+    x: float,
+    y: float,
+    z: float,
+    dmap: np.ndarray,
+    ignore: np.ndarray,
+) -> float:
+    """Bilinear distance at one court point's pixel, or -1 if the point does not count."""
+    h, w = dmap.shape
+    u, v, depth = project_point_njit(r, t, g, x, y, z)
+    # squared tangent of the angle off the optical axis: |X - C|^2 = depth^2 (1 + tan^2)
+    off_axis2 = (x - centre[0]) ** 2 + (y - centre[1]) ** 2 + (z - centre[2]) ** 2
+    if not (depth > MIN_DEPTH_M and off_axis2 <= depth * depth * (1.0 + max_tan2)):
+        return -1.0
+    if not (0.0 <= u <= w - 1.0 and 0.0 <= v <= h - 1.0):
+        return -1.0
+    if ignore.shape[0] > 0 and ignore[int(v + 0.5), int(u + 0.5)] != 0:
+        return -1.0
+    return _bilinear(dmap, u, v)
+
+
 @numba.njit(cache=True)
 def _sample_distances_njit(
     r: np.ndarray,
@@ -324,18 +358,46 @@ def _sample_distances_njit(
     distance: np.ndarray,
     counts: np.ndarray,
 ) -> None:
-    h, w = dmap.shape
     for j in range(points.shape[0]):
-        x, y, z = points[j, 0], points[j, 1], points[j, 2]
-        u, v, depth = project_point_njit(r, t, g, x, y, z)
-        # squared tangent of the angle off the optical axis: |X - C|^2 = depth^2 (1 + tan^2)
-        off_axis2 = (x - centre[0]) ** 2 + (y - centre[1]) ** 2 + (z - centre[2]) ** 2
-        ok = depth > MIN_DEPTH_M and off_axis2 <= depth * depth * (1.0 + max_tan2)
-        ok = ok and 0.0 <= u <= w - 1.0 and 0.0 <= v <= h - 1.0
-        if ok and ignore.shape[0] > 0:
-            ok = ignore[int(v + 0.5), int(u + 0.5)] == 0
-        counts[j] = ok
-        distance[j] = _bilinear(dmap, u, v) if ok else np.inf
+        d = _sample_distance(
+            r, t, g, centre, max_tan2, points[j, 0], points[j, 1], points[j, 2], dmap, ignore
+        )
+        counts[j] = d >= 0.0
+        distance[j] = d if d >= 0.0 else np.inf
+
+
+@numba.njit(cache=True)
+def _population_cost_njit(
+    r: np.ndarray,
+    t: np.ndarray,
+    pop: np.ndarray,
+    centres: np.ndarray,
+    max_tan2: np.ndarray,
+    points: np.ndarray,
+    dmap: np.ndarray,
+    ignore: np.ndarray,
+    tau: float,
+    out: np.ndarray,
+) -> None:
+    tau2 = tau * tau
+    for i in range(pop.shape[0]):
+        total = 0.0
+        for j in range(points.shape[0]):
+            d = _sample_distance(
+                r[i],
+                t[i],
+                pop[i],
+                centres[i],
+                max_tan2[i],
+                points[j, 0],
+                points[j, 1],
+                points[j, 2],
+                dmap,
+                ignore,
+            )
+            # rho(d)^2 / tau^2 = d^2 / (d^2 + tau^2); samples that do not count give 1
+            total += d * d / (d * d + tau2) if d >= 0.0 else 1.0
+        out[i] = total / points.shape[0]
 
 
 # points nearer the camera plane than this are treated as not visible
@@ -355,7 +417,6 @@ def sample_distances(
     """
     g = camera.as_population(genome)[0]
     r, t = camera.court_extrinsics(g)
-    fold = lens_fold_radius(g)
     distance = np.empty(len(points))
     counts = np.empty(len(points), dtype=np.bool_)
     _sample_distances_njit(
@@ -363,7 +424,7 @@ def sample_distances(
         t[0],
         np.ascontiguousarray(g),
         -r[0].T @ t[0],
-        fold * fold if np.isfinite(fold) else np.inf,
+        float(lens_fold_radii(g)[0] ** 2),
         np.ascontiguousarray(points, dtype=np.float64),
         np.ascontiguousarray(dmap, dtype=np.float32),
         _NO_IGNORE if ignore is None else ignore.view(np.uint8),
@@ -394,6 +455,8 @@ _POSE = [
 # Wide-basin polish of a start: a square-pixel pinhole (one focal length) and the pose only; far
 # from the answer, distortion and principal point would bend the court onto the wrong edges.
 PINHOLE_DIRECTIONS = _directions([({"f_u": 1.0, "f_v": 1.0}, 10.0), *_POSE])
+# Closer in: the same plus k1, without which a wide lens cannot sit on its lines at all.
+PINHOLE_K1_DIRECTIONS = _directions([({"f_u": 1.0, "f_v": 1.0}, 10.0), *_POSE, ({"k1": 1.0}, 0.01)])
 # Final fit: everything but p1, p2, k3, which edges of a few court lines do not pin down.
 FULL_DIRECTIONS = _directions(
     [
@@ -423,6 +486,35 @@ def robust_residuals(
     return tau * d / np.sqrt(d * d + tau * tau)
 
 
+def chamfer_costs(
+    genomes: np.ndarray,
+    samples: LineSamples,
+    dmap: np.ndarray,
+    ignore: np.ndarray | None,
+    truncation_px: float,
+) -> np.ndarray:
+    """Mean squared robust residual over all line samples, divided by tau^2, for each camera
+    of a population (N, 15) -> (N,): 0 when every sample is on an edge, 1 when none is near
+    one. Lower is better; comparable between cameras (the least-squares objective of
+    `refine_camera` up to a constant factor)."""
+    pop = np.ascontiguousarray(camera.as_population(genomes))
+    r, t = camera.court_extrinsics(pop)
+    out = np.empty(len(pop))
+    _population_cost_njit(
+        np.ascontiguousarray(r),
+        np.ascontiguousarray(t),
+        pop,
+        -np.einsum("nji,nj->ni", r, t),
+        lens_fold_radii(pop) ** 2,
+        np.ascontiguousarray(samples.points, dtype=np.float64),
+        np.ascontiguousarray(dmap, dtype=np.float32),
+        _NO_IGNORE if ignore is None else ignore.view(np.uint8),
+        float(truncation_px),
+        out,
+    )
+    return out
+
+
 def chamfer_cost(
     genome: np.ndarray,
     samples: LineSamples,
@@ -430,26 +522,30 @@ def chamfer_cost(
     ignore: np.ndarray | None,
     truncation_px: float,
 ) -> float:
-    """Mean squared robust residual over all line samples, divided by tau^2: 0 when every sample
-    is on an edge, 1 when none is near one. Lower is better; comparable between cameras."""
-    r = robust_residuals(genome, samples.points, dmap, ignore, truncation_px)
-    return float(np.mean(r * r)) / float(truncation_px) ** 2
+    """`chamfer_costs` of one camera (15,)."""
+    return float(chamfer_costs(genome, samples, dmap, ignore, truncation_px)[0])
 
 
 # Radii (normalised, undistorted) searched for a fold of the lens polynomial: 4 is 76 degrees off
 # axis, wider than any lens this model describes.
-_FOLD_SEARCH_RADII = np.linspace(0.0, 4.0, 801)
+_FOLD_SEARCH_RADII = np.linspace(0.0, 4.0, 241)
+
+
+def lens_fold_radii(genomes: np.ndarray) -> np.ndarray:
+    """Undistorted normalised radius (N,) where each lens's radial distortion first turns back
+    (d r_d / d r <= 0), +inf where it does not within 76 degrees of the axis."""
+    pop = camera.as_population(genomes)
+    k1, k2, k3 = (pop[:, camera.GENE[k], None] for k in ("k1", "k2", "k3"))
+    r2 = _FOLD_SEARCH_RADII**2
+    slope = 1.0 + r2 * (3.0 * k1 + r2 * (5.0 * k2 + 7.0 * k3 * r2))
+    turns = slope <= 0.0
+    first = np.argmax(turns, axis=1)
+    return np.where(turns.any(axis=1), _FOLD_SEARCH_RADII[first], np.inf)
 
 
 def lens_fold_radius(genome: np.ndarray) -> float:
-    """Undistorted normalised radius where the radial distortion first turns back
-    (d r_d / d r <= 0), +inf if it does not within 76 degrees of the axis."""
-    g = camera.as_population(genome)[0]
-    k1, k2, k3 = g[camera.GENE["k1"]], g[camera.GENE["k2"]], g[camera.GENE["k3"]]
-    r2 = _FOLD_SEARCH_RADII**2
-    slope = 1.0 + r2 * (3.0 * k1 + r2 * (5.0 * k2 + 7.0 * k3 * r2))
-    turning = np.flatnonzero(slope <= 0.0)
-    return float(_FOLD_SEARCH_RADII[turning[0]]) if len(turning) else np.inf
+    """`lens_fold_radii` of one camera."""
+    return float(lens_fold_radii(genome)[0])
 
 
 def lens_folds_in_image(genome: np.ndarray, image_size: tuple[int, int]) -> bool:
@@ -577,8 +673,8 @@ def fit_quality(
 
 # A court is "found" when the fit beats chance clearly, several court lines are on edges, and a
 # good part of the court is in the picture.
-MIN_INLIER_EXCESS = 0.8
-MIN_SUPPORTED_EDGES = 6
+MIN_INLIER_EXCESS = 0.6
+MIN_SUPPORTED_EDGES = 12
 MIN_COURT_IN_IMAGE = 0.25
 
 
@@ -612,7 +708,8 @@ def court_not_found_reason(quality: dict[str, float]) -> str | None:
 
 # Start search: the best placements of the grid are polished by a wide-basin chamfer fit (tau a few
 # percent of the image width) before the best of them seeds the GA.
-START_CANDIDATES_POLISHED = 6
+START_POLISHED_PER_RANKING = 6
+START_SEARCH_SPACING_FACTOR = 2.0
 POLISH_TRUNCATION_FRACTION = 0.03
 # truncation (px at 1920 px wide) of the robust chamfer residual in the refinement passes
 REFINE_TRUNCATIONS_AT_1920 = (60.0, 12.0, 3.0)
@@ -637,27 +734,50 @@ def find_start(
     ignore: np.ndarray | None,
     model: CourtModel,
 ) -> tuple[np.ndarray, dict[str, float]]:
-    """Best start camera: grid of placements scored in one population_fitness call, the top few
-    polished by a wide-basin chamfer fit, the one with the lowest chamfer cost returned."""
+    """Best start camera over a grid of typical placements.
+
+    Every placement is scored twice in one compiled call each: by the GA's fitness and by the
+    wide-truncation chamfer cost (the two rank differently: the fitness rewards long projected
+    lines on edges, the cost rewards every line being near one). The best few of each ranking
+    are polished by a wide-basin chamfer fit of a square-pixel pinhole, and the polished camera
+    with the lowest cost at the final refinement's truncation (among plausible ones) is
+    returned.
+    """
     height, width = fmap.shape
-    candidates = candidate_starts((width, height), model)
-    scores = population_fitness(candidates, samples, fmap)
-    top = np.argsort(-scores)[:START_CANDIDATES_POLISHED]
+    size = (width, height)
+    candidates = candidate_starts(size, model)
     tau = POLISH_TRUNCATION_FRACTION * width
-    polished = np.array(
-        [refine_camera(candidates[i], samples, dmap, ignore, tau, PINHOLE_DIRECTIONS) for i in top]
+    by_fitness = np.argsort(-population_fitness(candidates, samples, fmap))
+    by_cost = np.argsort(chamfer_costs(candidates, samples, dmap, ignore, tau))
+    chosen = list(
+        dict.fromkeys(
+            [*by_fitness[:START_POLISHED_PER_RANKING], *by_cost[:START_POLISHED_PER_RANKING]]
+        )
     )
-    costs = [
-        chamfer_cost(g, samples, dmap, ignore, tau)
-        if plausible(g, samples, (width, height))
-        else np.inf
-        for g in polished
-    ]
+    # wide first, then down to the refinement's truncations: compared at the final truncation,
+    # candidates must have settled there (a wide truncation alone favours courts shrunk onto busy
+    # parts of the image, which are near many edges without being on any)
+    scale = width / 1920.0
+    fine_px = max(REFINE_TRUNCATIONS_AT_1920[-1] * scale, 1.5)
+    polished = []
+    for i in chosen:
+        genome = refine_camera(candidates[i], samples, dmap, ignore, tau, PINHOLE_DIRECTIONS)
+        for step_px in REFINE_TRUNCATIONS_AT_1920[1:]:
+            genome = refine_camera(
+                genome, samples, dmap, ignore, max(step_px * scale, 1.5), PINHOLE_K1_DIRECTIONS
+            )
+        polished.append(genome)
+    costs = chamfer_costs(np.array(polished), samples, dmap, ignore, fine_px)
+    for k, genome in enumerate(polished):
+        if not plausible(genome, samples, size):
+            costs[k] = np.inf
     best = int(np.argmin(costs))
     info = {
         "grid_candidates": float(len(candidates)),
-        "grid_best_fitness": float(scores[top[0]]),
         "start_cost": float(costs[best]),
+        "start_from_cost_ranking": float(
+            chosen[best] not in by_fitness[:START_POLISHED_PER_RANKING]
+        ),
     }
     return polished[best], info
 
@@ -683,12 +803,23 @@ def refine_fully(
     image_size: tuple[int, int],
 ) -> np.ndarray:
     """`refine_camera` with a shrinking truncation (REFINE_TRUNCATIONS_AT_1920, scaled with the
-    image width): wide enough first to pull lines a few pixels off onto their edges, tight at the
-    end so that only the edges on the lines decide the sub-pixel position."""
+    image width): wide first, to pull lines that are many pixels off onto their edges, tight at
+    the end, so that only the edges on the lines decide the sub-pixel position.
+
+    A wide pass can also pull lines with no edge of their own onto other things' edges (sparse
+    edge maps, clutter), so each pass is a proposal, kept only if it lowers the chamfer cost at
+    the finest truncation, the quantity the last pass minimises.
+    """
     scale = image_size[0] / 1920.0
+    fine_px = max(REFINE_TRUNCATIONS_AT_1920[-1] * scale, 1.5)
+    best = np.asarray(genome, dtype=np.float64)
+    best_cost = chamfer_cost(best, samples, dmap, ignore, fine_px)
     for tau in REFINE_TRUNCATIONS_AT_1920:
-        genome = refine_camera(genome, samples, dmap, ignore, max(tau * scale, 1.5))
-    return genome
+        proposal = refine_camera(best, samples, dmap, ignore, max(tau * scale, 1.5))
+        cost = chamfer_cost(proposal, samples, dmap, ignore, fine_px)
+        if cost < best_cost:
+            best, best_cost = proposal, cost
+    return best
 
 
 def refine_best(
@@ -773,7 +904,12 @@ def calibrate(
     report("optimising", 0.0, {"generation": 0})
     start_info: dict[str, float] = {}
     if start_given is None:
-        start, start_info = find_start(fmap, samples, dmap, ignore, model)
+        # the search compares thousands of cameras and polishes a dozen: samples twice as
+        # sparse as the final fit's are plenty for that and halve its cost
+        search_samples, _ = fitting_samples(
+            model, START_SEARCH_SPACING_FACTOR * spacing_for_image(width), not given_edges
+        )
+        start, start_info = find_start(fmap, search_samples, dmap, ignore, model)
     else:
         start = start_given
     timings["start_search"] = time.perf_counter() - t0
@@ -823,7 +959,7 @@ def calibrate(
     timings["total"] = time.perf_counter() - t_start
     reason = court_not_found_reason(quality)
     if reason is not None:
-        raise CourtNotFound(f"court not found: {reason}", quality)
+        raise CourtNotFound(f"court not found: {reason}", quality, genome)
     fitness = float(population_fitness(genome, samples, fmap)[0])
     return CalibrationResult(
         genome=genome,
