@@ -185,11 +185,12 @@ def project_visible(genome: np.ndarray, points: np.ndarray) -> np.ndarray:
     return pixels
 
 
-def _distort_normalized(
-    x: np.ndarray, y: np.ndarray, d: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Distorted normalised coordinates and the Jacobian (4, ...) of the map, for Newton steps."""
-    k1, k2, p1, p2, k3 = d
+@numba.njit(cache=True, inline="always")
+def _distort_with_jacobian(
+    x: float, y: float, d: np.ndarray
+) -> tuple[float, float, float, float, float, float]:
+    """Distorted normalised (xd, yd) and the Jacobian entries of the map, for Newton steps."""
+    k1, k2, p1, p2, k3 = d[0], d[1], d[2], d[3], d[4]
     r2 = x * x + y * y
     radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
     dradial_dr2 = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
@@ -197,9 +198,37 @@ def _distort_normalized(
     yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
     dxd_dx = radial + 2.0 * x * x * dradial_dr2 + 2.0 * p1 * y + 6.0 * p2 * x
     dxd_dy = 2.0 * x * y * dradial_dr2 + 2.0 * p1 * x + 2.0 * p2 * y
-    dyd_dx = 2.0 * x * y * dradial_dr2 + 2.0 * p1 * x + 2.0 * p2 * y
     dyd_dy = radial + 2.0 * y * y * dradial_dr2 + 6.0 * p1 * y + 2.0 * p2 * x
-    return xd, yd, np.stack([dxd_dx, dxd_dy, dyd_dx, dyd_dy])
+    return xd, yd, dxd_dx, dxd_dy, dxd_dy, dyd_dy
+
+
+@numba.njit(cache=True)
+def _undistort_njit(
+    xd: np.ndarray, yd: np.ndarray, dist: np.ndarray, iterations: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    n = xd.shape[0]
+    xs = np.empty(n)
+    ys = np.empty(n)
+    ok = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        tx, ty = xd[i], yd[i]
+        x, y = tx, ty
+        for _ in range(iterations):
+            fx, fy, a, b, c, e = _distort_with_jacobian(x, y, dist)
+            rx, ry = fx - tx, fy - ty
+            if abs(rx) < 1e-13 and abs(ry) < 1e-13:
+                break
+            det = a * e - b * c
+            if abs(det) < 1e-12:
+                det = 1e-12
+            x -= (e * rx - b * ry) / det
+            y -= (-c * rx + a * ry) / det
+        fx, fy, a, b, c, e = _distort_with_jacobian(x, y, dist)
+        residual = np.hypot(fx - tx, fy - ty)
+        xs[i], ys[i] = x, y
+        # a root on the folded part of the lens model (det <= 0) is not a physical preimage
+        ok[i] = np.isfinite(x) and np.isfinite(y) and residual < 1e-10 and a * e - b * c > 0.0
+    return xs, ys, ok
 
 
 def undistort_normalized(
@@ -210,19 +239,14 @@ def undistort_normalized(
     `ok` is False where Newton did not converge or converged onto the folded part of the lens
     model (Jacobian determinant <= 0), i.e. where no physical undistorted point exists.
     """
-    x, y = xd.copy(), yd.copy()
-    for _ in range(iterations):
-        fx, fy, jac = _distort_normalized(x, y, dist)
-        rx, ry = fx - xd, fy - yd
-        det = jac[0] * jac[3] - jac[1] * jac[2]
-        safe = np.where(np.abs(det) > 1e-12, det, 1e-12)
-        x = x - (jac[3] * rx - jac[1] * ry) / safe
-        y = y - (-jac[2] * rx + jac[0] * ry) / safe
-    fx, fy, jac = _distort_normalized(x, y, dist)
-    det = jac[0] * jac[3] - jac[1] * jac[2]
-    residual = np.hypot(fx - xd, fy - yd)
-    ok = np.isfinite(x) & np.isfinite(y) & (residual < 1e-10) & (det > 0)
-    return x, y, ok
+    shape = np.shape(xd)
+    x, y, ok = _undistort_njit(
+        np.ascontiguousarray(xd, dtype=np.float64).ravel(),
+        np.ascontiguousarray(yd, dtype=np.float64).ravel(),
+        np.ascontiguousarray(dist, dtype=np.float64),
+        iterations,
+    )
+    return x.reshape(shape), y.reshape(shape), ok.reshape(shape)
 
 
 def pixel_to_floor(
