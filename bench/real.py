@@ -8,7 +8,10 @@ For every `NAME.json` in DATA_DIR (format: DATA_DIR/KEYPOINTS.md) with its image
 and prints, per run, the floor error (cm) of the annotated floor keypoints (their pixels mapped
 to the floor through the calibrated camera, against their court positions) and the reprojection
 error (px) of all annotated keypoints, for the refined camera and for the GA's own camera before
-refinement. The `check_fit` camera's own numbers are the limit (it was fitted to these points).
+refinement; then the quality's inlier excess, which camera the refinement started from ("ga",
+"ga_simple_lens" or "start") and the wall time. The `check_fit` camera's own numbers are the
+limit (it was fitted to these points). A refused calibration (CourtNotFound) shows the numbers
+of the camera it refused.
 
 The data are not part of the repository and must stay where they are; nothing here is tuned on
 them.
@@ -117,10 +120,12 @@ def run(data_dir: Path, seeds: int, time_budget_s: float | None) -> None:
                         ann.image, start_genome=start, seed=seed, time_budget_s=time_budget_s
                     )
                 except pipeline.CourtNotFound as exc:
-                    print(
-                        f"{ann.name:<14} {label:<13} {seed:>4} | {exc} "
-                        f"({time.perf_counter() - t0:.1f} s)"
-                    )
+                    # what the refused camera would have been, so refusals can be judged too
+                    line = f"{ann.name:<14} {label:<13} {seed:>4} | "
+                    if exc.genome is not None:
+                        floor_cm, reproj_px = errors(exc.genome, ann)
+                        line += f"{_stats(floor_cm)} | {_stats(reproj_px)} | "
+                    print(f"{line}REFUSED: {exc} ({time.perf_counter() - t0:.1f} s)")
                     continue
                 elapsed = time.perf_counter() - t0
                 floor_cm, reproj_px = errors(result.genome, ann)
