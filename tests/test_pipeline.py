@@ -228,11 +228,11 @@ def test_bad_input_raises_value_error(photo):
 def test_lens_fold_guard():
     genome = club_camera()
     assert not pipeline.lens_folds_in_image(genome, SIZE)
-    assert np.isfinite(pipeline.lens_fold_radius(genome))  # folds, but outside the picture
+    assert np.isfinite(camera.lens_fold_radius(genome))  # folds, but outside the picture
     genome[camera.GENE["k1"]] = -0.6
     assert pipeline.lens_folds_in_image(genome, SIZE)
     genome[camera.GENE["k1"]] = 0.1
-    assert pipeline.lens_fold_radius(genome) == np.inf
+    assert camera.lens_fold_radius(genome) == np.inf
 
 
 def test_painted_lines_are_fitted_by_their_borders():

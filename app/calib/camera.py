@@ -231,6 +231,30 @@ def _undistort_njit(
     return xs, ys, ok
 
 
+_FOLD_SEARCH_RADII = np.linspace(0.0, 4.0, 241)
+
+
+def lens_fold_radii(genomes: np.ndarray) -> np.ndarray:
+    """Undistorted normalised radius (N,) where each lens's radial distortion first turns back
+    (d r_d / d r <= 0), +inf where it does not within 76 degrees of the axis.
+
+    Past that radius the model maps two directions onto one pixel: nothing beyond it is a real
+    image of the court, so fits and drawings must ignore it.
+    """
+    pop = as_population(genomes)
+    k1, k2, k3 = (pop[:, GENE[k], None] for k in ("k1", "k2", "k3"))
+    r2 = _FOLD_SEARCH_RADII**2
+    slope = 1.0 + r2 * (3.0 * k1 + r2 * (5.0 * k2 + 7.0 * k3 * r2))
+    turns = slope <= 0.0
+    first = np.argmax(turns, axis=1)
+    return np.where(turns.any(axis=1), _FOLD_SEARCH_RADII[first], np.inf)
+
+
+def lens_fold_radius(genome: np.ndarray) -> float:
+    """`lens_fold_radii` of one camera."""
+    return float(lens_fold_radii(genome)[0])
+
+
 def undistort_normalized(
     xd: np.ndarray, yd: np.ndarray, dist: np.ndarray, iterations: int = 30
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -74,8 +74,8 @@ def fitness_map(edge_image: np.ndarray, transformed: bool = True) -> np.ndarray:
 
 
 @numba.njit(cache=True, inline="always")
-def _bilinear(fmap: np.ndarray, u: float, v: float) -> float:
-    """Bilinear lookup at 0 <= u < W - 1, 0 <= v < H - 1 (the caller clamps, see `_index_limit`).
+def bilinear_njit(fmap: np.ndarray, u: float, v: float) -> float:
+    """Bilinear lookup at 0 <= u < W - 1, 0 <= v < H - 1 (the caller clamps, see `index_limit`).
 
     No clamps or branches here: that keeps the loop around it vectorisable with gathers, which
     halves the cost of the lookups.
@@ -95,9 +95,9 @@ def _bilinear(fmap: np.ndarray, u: float, v: float) -> float:
 
 
 @numba.njit(cache=True, inline="always")
-def _index_limit(size: int) -> float:
+def index_limit(size: int) -> float:
     """Largest coordinate below size - 1: the last pixel centre is then read as 1 - 2e-13 of the way
-    from its neighbour, so `_bilinear` never indexes past the map."""
+    from its neighbour, so `bilinear_njit` never indexes past the map."""
     return np.nextafter(float(size - 1), 0.0)
 
 
@@ -139,8 +139,8 @@ def _clipped_segment(
                     return 0.0
                 t1 = min(t1, s)
     h, w = fmap.shape
-    u_lim = _index_limit(w)
-    v_lim = _index_limit(h)
+    u_lim = index_limit(w)
+    v_lim = index_limit(h)
     a_u = min(max(u0 + t0 * du, 0.0), u_max)
     a_v = min(max(v0 + t0 * dv, 0.0), v_max)
     b_u = min(max(u0 + t1 * du, 0.0), u_max)
@@ -148,8 +148,8 @@ def _clipped_segment(
     length = max(abs(b_u - a_u), abs(b_v - a_v))
     if length == 0.0:
         return 0.0
-    f_a = _bilinear(fmap, min(a_u, u_lim), min(a_v, v_lim))
-    f_b = _bilinear(fmap, min(b_u, u_lim), min(b_v, v_lim))
+    f_a = bilinear_njit(fmap, min(a_u, u_lim), min(a_v, v_lim))
+    f_b = bilinear_njit(fmap, min(b_u, u_lim), min(b_v, v_lim))
     return 0.5 * (f_a + f_b) * length
 
 
@@ -205,8 +205,8 @@ def _project_samples(g: np.ndarray, xyz: np.ndarray, fmap: np.ndarray, ws: Works
     h, w = fmap.shape
     u_max = float(w - 1)
     v_max = float(h - 1)
-    u_lim = _index_limit(w)
-    v_lim = _index_limit(h)
+    u_lim = index_limit(w)
+    v_lim = index_limit(h)
     r, t = ws.r, ws.t
     extrinsics_njit(g, r, t)
     xs, ys, zs = xyz[0], xyz[1], xyz[2]
@@ -241,9 +241,9 @@ def _integrate_inside(joins_next: np.ndarray, fmap: np.ndarray, ws: Workspace) -
         length = max(abs(u_in[j + 1] - u_in[j]), abs(v_in[j + 1] - v_in[j]))
         segment[j] = joins_next[j] * inside[j] * inside[j + 1] * length
     segment[n - 1] = 0.0
-    total = 0.5 * segment[0] * _bilinear(fmap, u_in[0], v_in[0])
+    total = 0.5 * segment[0] * bilinear_njit(fmap, u_in[0], v_in[0])
     for j in range(1, n):
-        total += 0.5 * (segment[j - 1] + segment[j]) * _bilinear(fmap, u_in[j], v_in[j])
+        total += 0.5 * (segment[j - 1] + segment[j]) * bilinear_njit(fmap, u_in[j], v_in[j])
     return total
 
 

@@ -35,7 +35,7 @@ from scipy import optimize
 from app.calib import camera, edges, render
 from app.calib.camera import project_point_njit
 from app.calib.court import CourtModel, LineSamples, court_model, sample_edges, spacing_for_image
-from app.calib.fitness import distance_map, population_fitness
+from app.calib.fitness import bilinear_njit, distance_map, index_limit, population_fitness
 from app.calib.ga import DEFAULT_BUNDLE, bundle_fitness_map, get_bundle, run_ga
 
 ProgressFn = Callable[[str, float, dict[str, Any]], None]
@@ -314,19 +314,6 @@ def _surfaces_of(model: CourtModel, a: np.ndarray, b: np.ndarray) -> list[np.nda
     return normals
 
 
-@numba.njit(cache=True)
-def _bilinear(image: np.ndarray, u: float, v: float) -> float:
-    """Bilinear value at (u, v), which the caller keeps inside [0, W-1] x [0, H-1]."""
-    h, w = image.shape
-    iu = min(int(u), w - 2)
-    iv = min(int(v), h - 2)
-    fu = u - iu
-    fv = v - iv
-    top = image[iv, iu] + fu * (image[iv, iu + 1] - image[iv, iu])
-    bottom = image[iv + 1, iu] + fu * (image[iv + 1, iu + 1] - image[iv + 1, iu])
-    return top + fv * (bottom - top)
-
-
 @numba.njit(cache=True, inline="always")
 def _sample_distance(
     r: np.ndarray,
@@ -351,7 +338,8 @@ def _sample_distance(
         return -1.0
     if ignore.shape[0] > 0 and ignore[int(v + 0.5), int(u + 0.5)] != 0:
         return -1.0
-    return _bilinear(dmap, u, v)
+    # the last row/column reads as its neighbour plus 1 - 2e-13 of the step: same lookup as the GA
+    return bilinear_njit(dmap, min(u, index_limit(w)), min(v, index_limit(h)))
 
 
 @numba.njit(cache=True)
@@ -433,7 +421,7 @@ def sample_distances(
         t[0],
         np.ascontiguousarray(g),
         -r[0].T @ t[0],
-        float(lens_fold_radii(g)[0] ** 2),
+        float(camera.lens_fold_radii(g)[0] ** 2),
         np.ascontiguousarray(points, dtype=np.float64),
         np.ascontiguousarray(dmap, dtype=np.float32),
         _NO_IGNORE if ignore is None else ignore.view(np.uint8),
@@ -514,7 +502,7 @@ def chamfer_costs(
         np.ascontiguousarray(t),
         pop,
         -np.einsum("nji,nj->ni", r, t),
-        lens_fold_radii(pop) ** 2,
+        camera.lens_fold_radii(pop) ** 2,
         np.ascontiguousarray(samples.points, dtype=np.float64),
         np.ascontiguousarray(dmap, dtype=np.float32),
         _NO_IGNORE if ignore is None else ignore.view(np.uint8),
@@ -537,33 +525,13 @@ def chamfer_cost(
 
 # Radii (normalised, undistorted) searched for a fold of the lens polynomial: 4 is 76 degrees off
 # axis, wider than any lens this model describes.
-_FOLD_SEARCH_RADII = np.linspace(0.0, 4.0, 241)
-
-
-def lens_fold_radii(genomes: np.ndarray) -> np.ndarray:
-    """Undistorted normalised radius (N,) where each lens's radial distortion first turns back
-    (d r_d / d r <= 0), +inf where it does not within 76 degrees of the axis."""
-    pop = camera.as_population(genomes)
-    k1, k2, k3 = (pop[:, camera.GENE[k], None] for k in ("k1", "k2", "k3"))
-    r2 = _FOLD_SEARCH_RADII**2
-    slope = 1.0 + r2 * (3.0 * k1 + r2 * (5.0 * k2 + 7.0 * k3 * r2))
-    turns = slope <= 0.0
-    first = np.argmax(turns, axis=1)
-    return np.where(turns.any(axis=1), _FOLD_SEARCH_RADII[first], np.inf)
-
-
-def lens_fold_radius(genome: np.ndarray) -> float:
-    """`lens_fold_radii` of one camera."""
-    return float(lens_fold_radii(genome)[0])
-
-
 def lens_folds_in_image(genome: np.ndarray, image_size: tuple[int, int]) -> bool:
     """True if the lens turns back before the middle of the image's farther border: such a lens
     maps two directions to one pixel well inside the picture, and a fit can hide court lines in
     the fold. (Wide real lenses described by k1 alone may fold in the very corners; that is
     allowed.)"""
     g = camera.as_population(genome)[0]
-    fold = lens_fold_radius(g)
+    fold = camera.lens_fold_radius(g)
     if not np.isfinite(fold):
         return False
     width, height = image_size

@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from app.calib.camera import project_points
+from app.calib.camera import court_extrinsics, lens_fold_radius, project_points
 from app.calib.court import CourtModel, sample_edges
 
 # Edges are drawn as polylines through samples this far apart, so lens distortion bends them.
@@ -13,13 +13,20 @@ DRAW_SPACING_M = 0.02
 
 
 def court_polylines(genome: np.ndarray, model: CourtModel) -> list[np.ndarray]:
-    """Projected court edges as pixel polylines (K, 2) float64, split where points go behind the camera."""
+    """Projected court edges as pixel polylines (K, 2) float64, split where points go behind the camera
+    or past the lens fold."""
     samples = sample_edges(model, DRAW_SPACING_M)
     pixels, depth = project_points(genome, samples.points)
+    # points past the lens fold project back into the picture as ghost loops: leave them out
+    r, t = court_extrinsics(genome)
+    cam = samples.points @ r[0].T + t[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        radius2 = (cam[:, 0] ** 2 + cam[:, 1] ** 2) / cam[:, 2] ** 2
+    drawable = (depth > 1e-6) & (radius2 < lens_fold_radius(genome) ** 2)
     lines: list[np.ndarray] = []
     for e in range(len(samples.offsets) - 1):
         lo, hi = samples.offsets[e], samples.offsets[e + 1]
-        front = depth[lo:hi] > 1e-6
+        front = drawable[lo:hi]
         px = pixels[lo:hi]
         # split into runs of consecutive in-front samples
         edges = np.flatnonzero(np.diff(np.concatenate([[0], front.astype(np.int8), [0]])))
