@@ -346,21 +346,31 @@ def _sample_distance(
 def _sample_distances_njit(
     r: np.ndarray,
     t: np.ndarray,
-    g: np.ndarray,
-    centre: np.ndarray,
-    max_tan2: float,
+    pop: np.ndarray,
+    centres: np.ndarray,
+    max_tan2: np.ndarray,
     points: np.ndarray,
     dmap: np.ndarray,
     ignore: np.ndarray,
     distance: np.ndarray,
     counts: np.ndarray,
 ) -> None:
-    for j in range(points.shape[0]):
-        d = _sample_distance(
-            r, t, g, centre, max_tan2, points[j, 0], points[j, 1], points[j, 2], dmap, ignore
-        )
-        counts[j] = d >= 0.0
-        distance[j] = d if d >= 0.0 else np.inf
+    for i in range(pop.shape[0]):
+        for j in range(points.shape[0]):
+            d = _sample_distance(
+                r[i],
+                t[i],
+                pop[i],
+                centres[i],
+                max_tan2[i],
+                points[j, 0],
+                points[j, 1],
+                points[j, 2],
+                dmap,
+                ignore,
+            )
+            counts[i, j] = d >= 0.0
+            distance[i, j] = d if d >= 0.0 else np.inf
 
 
 @numba.njit(cache=True)
@@ -403,31 +413,34 @@ _NO_IGNORE = np.zeros((0, 0), dtype=np.uint8)
 
 
 def sample_distances(
-    genome: np.ndarray, points: np.ndarray, dmap: np.ndarray, ignore: np.ndarray | None = None
+    genomes: np.ndarray, points: np.ndarray, dmap: np.ndarray, ignore: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Bilinear distance (M,) at each projected point and whether it counts (M,) bool.
+    """Bilinear distance at each projected point and whether it counts: (M,) for one camera
+    (15,), (N, M) for a population (N, 15), in one compiled call.
 
     A point counts when it is in front of the camera, inside the lens's monotonic field (see
-    `lens_fold_radius`: beyond it the polynomial maps far-off points back into the image as
-    ghosts), inside the image and not on `ignore` (bool (H, W), moving pixels); uncounted
+    `camera.lens_fold_radius`: beyond it the polynomial maps far-off points back into the image
+    as ghosts), inside the image and not on `ignore` (bool (H, W), moving pixels); uncounted
     points have distance +inf.
     """
-    g = camera.as_population(genome)[0]
-    r, t = camera.court_extrinsics(g)
-    distance = np.empty(len(points))
-    counts = np.empty(len(points), dtype=np.bool_)
+    pop = np.ascontiguousarray(camera.as_population(genomes))
+    r, t = camera.court_extrinsics(pop)
+    distance = np.empty((len(pop), len(points)))
+    counts = np.empty((len(pop), len(points)), dtype=np.bool_)
     _sample_distances_njit(
-        r[0],
-        t[0],
-        np.ascontiguousarray(g),
-        -r[0].T @ t[0],
-        float(camera.lens_fold_radii(g)[0] ** 2),
+        r,
+        t,
+        pop,
+        -np.einsum("nji,nj->ni", r, t),
+        camera.lens_fold_radii(pop) ** 2,
         np.ascontiguousarray(points, dtype=np.float64),
         np.ascontiguousarray(dmap, dtype=np.float32),
         _NO_IGNORE if ignore is None else ignore.view(np.uint8),
         distance,
         counts,
     )
+    if np.ndim(genomes) == 1:
+        return distance[0], counts[0]
     return distance, counts
 
 
@@ -475,8 +488,9 @@ def robust_residuals(
     ignore: np.ndarray | None,
     truncation_px: float,
 ) -> np.ndarray:
-    """Per line sample tau d / sqrt(d^2 + tau^2) (M,): d the bilinear distance to the nearest
-    edge, tau `truncation_px`; samples that do not count (outside, behind, ignored) give tau."""
+    """Per line sample tau d / sqrt(d^2 + tau^2), (M,) for one camera or (N, M) for a
+    population: d the bilinear distance to the nearest edge, tau `truncation_px`; samples that
+    do not count (outside, behind, ignored) give tau."""
     tau = float(truncation_px)
     d, _ = sample_distances(genome, points, dmap, ignore)
     d = np.minimum(d, 1e6)
@@ -569,6 +583,9 @@ def plausible(genome: np.ndarray, samples: LineSamples, image_size: tuple[int, i
     return court_extent_fraction(genome, samples, image_size) >= MIN_COURT_EXTENT
 
 
+FD_RELATIVE_STEP = 1e-3  # forward-difference step per direction unit (see the directions above)
+
+
 def refine_camera(
     genome: np.ndarray,
     samples: LineSamples,
@@ -593,11 +610,24 @@ def refine_camera(
     def residuals(x: np.ndarray) -> np.ndarray:
         return robust_residuals(start + directions @ x, points, dmap, ignore, tau)
 
+    def jacobian(x: np.ndarray) -> np.ndarray:
+        # forward differences (MINPACK's step rule), all n perturbed cameras in one compiled call
+        steps = FD_RELATIVE_STEP * np.where(x >= 0.0, 1.0, -1.0) * np.maximum(1.0, np.abs(x))
+        shifted = x[None, :] + np.diag(steps)
+        cameras = start[None, :] + np.vstack([x[None, :], shifted]) @ directions.T
+        values = robust_residuals(cameras, points, dmap, ignore, tau)
+        return ((values[1:] - values[0]) / (shifted - x[None, :]).diagonal()[:, None]).T
+
     # Levenberg-Marquardt (MINPACK): a dozen unknowns and ~1500 residuals, where it is several
     # times faster than the trust-region solvers; lens folds are rejected by the caller instead
     # of bounded here.
     fit = optimize.least_squares(
-        residuals, np.zeros(n), method="lm", diff_step=1e-3, max_nfev=max_evaluations
+        # the budget counts Jacobians as n evaluations each, as MINPACK does for its own differences
+        residuals,
+        np.zeros(n),
+        jac=jacobian,
+        method="lm",
+        max_nfev=max(2, max_evaluations // (n + 1)),
     )
     return start + directions @ fit.x
 
@@ -784,8 +814,9 @@ def refine_fully(
     the end, so that only the edges on the lines decide the sub-pixel position.
 
     A wide pass can also pull lines with no edge of their own onto other things' edges (sparse
-    edge maps, clutter), so each pass is a proposal, kept only if it lowers the chamfer cost at
-    the finest truncation, the quantity the last pass minimises.
+    edge maps, clutter), so each pass is a proposal, kept only if it is `plausible` and lowers
+    the chamfer cost at the finest truncation, the quantity the last pass minimises (a court
+    shrunk onto a few edge pixels costs almost nothing, so the cost alone would take it).
     """
     scale = image_size[0] / 1920.0
     fine_px = max(REFINE_TRUNCATIONS_AT_1920[-1] * scale, 1.5)
@@ -794,7 +825,7 @@ def refine_fully(
     for tau in REFINE_TRUNCATIONS_AT_1920:
         proposal = refine_camera(best, samples, dmap, ignore, max(tau * scale, 1.5))
         cost = chamfer_cost(proposal, samples, dmap, ignore, fine_px)
-        if cost < best_cost:
+        if cost < best_cost and plausible(proposal, samples, image_size):
             best, best_cost = proposal, cost
     return best
 
