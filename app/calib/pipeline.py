@@ -352,40 +352,14 @@ def _sample_distances_njit(
     points: np.ndarray,
     dmap: np.ndarray,
     ignore: np.ndarray,
-    distance: np.ndarray,
-    counts: np.ndarray,
-) -> None:
-    for i in range(pop.shape[0]):
-        for j in range(points.shape[0]):
-            d = _sample_distance(
-                r[i],
-                t[i],
-                pop[i],
-                centres[i],
-                max_tan2[i],
-                points[j, 0],
-                points[j, 1],
-                points[j, 2],
-                dmap,
-                ignore,
-            )
-            counts[i, j] = d >= 0.0
-            distance[i, j] = d if d >= 0.0 else np.inf
-
-
-@numba.njit(cache=True)
-def _population_cost_njit(
-    r: np.ndarray,
-    t: np.ndarray,
-    pop: np.ndarray,
-    centres: np.ndarray,
-    max_tan2: np.ndarray,
-    points: np.ndarray,
-    dmap: np.ndarray,
-    ignore: np.ndarray,
     tau: float,
-    out: np.ndarray,
+    distance: np.ndarray,
+    cost: np.ndarray,
 ) -> None:
+    """Per camera of `pop`: the robust chamfer cost into `cost` (N,) and, unless `distance` is
+    empty (shape (0, 0): ranking many cameras needs only the cost), each sample's distance into
+    `distance` (N, M), +inf where the sample does not count."""
+    store = distance.shape[0] > 0
     tau2 = tau * tau
     for i in range(pop.shape[0]):
         total = 0.0
@@ -404,12 +378,43 @@ def _population_cost_njit(
             )
             # rho(d)^2 / tau^2 = d^2 / (d^2 + tau^2); samples that do not count give 1
             total += d * d / (d * d + tau2) if d >= 0.0 else 1.0
-        out[i] = total / points.shape[0]
+            if store:
+                distance[i, j] = d if d >= 0.0 else np.inf
+        cost[i] = total / points.shape[0]
 
 
 # points nearer the camera plane than this are treated as not visible
 MIN_DEPTH_M = 0.05
 _NO_IGNORE = np.zeros((0, 0), dtype=np.uint8)
+
+
+def _distances_and_costs(
+    genomes: np.ndarray,
+    points: np.ndarray,
+    dmap: np.ndarray,
+    ignore: np.ndarray | None,
+    truncation_px: float,
+    keep_distances: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distances (N, M) (empty unless `keep_distances`) and robust costs (N,), one compiled call."""
+    pop = np.ascontiguousarray(camera.as_population(genomes))
+    r, t = camera.court_extrinsics(pop)
+    distance = np.empty((len(pop), len(points)) if keep_distances else (0, 0))
+    cost = np.empty(len(pop))
+    _sample_distances_njit(
+        r,
+        t,
+        pop,
+        -np.einsum("nji,nj->ni", r, t),
+        camera.lens_fold_radii(pop) ** 2,
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(dmap, dtype=np.float32),
+        _NO_IGNORE if ignore is None else ignore.view(np.uint8),
+        float(truncation_px),
+        distance,
+        cost,
+    )
+    return distance, cost
 
 
 def sample_distances(
@@ -423,22 +428,8 @@ def sample_distances(
     as ghosts), inside the image and not on `ignore` (bool (H, W), moving pixels); uncounted
     points have distance +inf.
     """
-    pop = np.ascontiguousarray(camera.as_population(genomes))
-    r, t = camera.court_extrinsics(pop)
-    distance = np.empty((len(pop), len(points)))
-    counts = np.empty((len(pop), len(points)), dtype=np.bool_)
-    _sample_distances_njit(
-        r,
-        t,
-        pop,
-        -np.einsum("nji,nj->ni", r, t),
-        camera.lens_fold_radii(pop) ** 2,
-        np.ascontiguousarray(points, dtype=np.float64),
-        np.ascontiguousarray(dmap, dtype=np.float32),
-        _NO_IGNORE if ignore is None else ignore.view(np.uint8),
-        distance,
-        counts,
-    )
+    distance, _ = _distances_and_costs(genomes, points, dmap, ignore, 1.0, keep_distances=True)
+    counts = np.isfinite(distance)
     if np.ndim(genomes) == 1:
         return distance[0], counts[0]
     return distance, counts
@@ -508,22 +499,10 @@ def chamfer_costs(
     of a population (N, 15) -> (N,): 0 when every sample is on an edge, 1 when none is near
     one. Lower is better; comparable between cameras (the least-squares objective of
     `refine_camera` up to a constant factor)."""
-    pop = np.ascontiguousarray(camera.as_population(genomes))
-    r, t = camera.court_extrinsics(pop)
-    out = np.empty(len(pop))
-    _population_cost_njit(
-        np.ascontiguousarray(r),
-        np.ascontiguousarray(t),
-        pop,
-        -np.einsum("nji,nj->ni", r, t),
-        camera.lens_fold_radii(pop) ** 2,
-        np.ascontiguousarray(samples.points, dtype=np.float64),
-        np.ascontiguousarray(dmap, dtype=np.float32),
-        _NO_IGNORE if ignore is None else ignore.view(np.uint8),
-        float(truncation_px),
-        out,
+    _, cost = _distances_and_costs(
+        genomes, samples.points, dmap, ignore, truncation_px, keep_distances=False
     )
-    return out
+    return cost
 
 
 def chamfer_cost(
