@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
+import orjson
 from fastapi import APIRouter
 from fastapi.responses import Response
 
@@ -43,8 +42,9 @@ def _pairs_or_null(values: np.ndarray, decimals: int) -> list[list[float] | None
 
 
 def _json(payload: dict[str, object]) -> Response:
-    # built by hand: 100 000 points through FastAPI's encoder would cost more than the maths
-    return Response(json.dumps(payload, allow_nan=False), media_type="application/json")
+    # built by hand with orjson: 100 000 points through FastAPI's encoder (or the stdlib's) cost
+    # several times more than the maths; non-finite rows are already None, so no NaN reaches it
+    return Response(orjson.dumps(payload), media_type="application/json")
 
 
 def _as_array(pairs: list[tuple[float, float]]) -> np.ndarray:
