@@ -35,7 +35,10 @@ def add_arguments(command: str, parser: argparse.ArgumentParser) -> None:
         "(default: search typical camera placements)",
     )
     parser.add_argument(
-        "--bundle", default=None, help="GA strategy bundle (default: the paper's best)"
+        "--bundle",
+        default=None,
+        help="run the paper's GA with this strategy bundle between search and refinement, e.g. "
+        "n16-tdm-roulette-single-dist (default: no GA)",
     )
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument(
@@ -46,7 +49,7 @@ def add_arguments(command: str, parser: argparse.ArgumentParser) -> None:
         type=float,
         default=None,
         metavar="S",
-        help="GA wall-time budget in seconds",
+        help="the GA's wall-time budget in seconds (with --bundle)",
     )
     parser.add_argument(
         "--spec", default="wsf", help="court spec: wsf, psa or doubles (default wsf)"
@@ -125,14 +128,15 @@ def _calibrate(args: argparse.Namespace) -> None:
 
     from app.calib import pipeline
     from app.calib.court import get_spec
-    from app.calib.ga import DEFAULT_BUNDLE, get_bundle
+    from app.calib.ga import get_bundle
 
     _check_writable(args.out, "result")
     if args.overlay is not None:
         _check_writable(args.overlay, "overlay")
-    bundle_name = args.bundle if args.bundle is not None else DEFAULT_BUNDLE.name
+    bundle_name = args.bundle
     try:
-        get_bundle(bundle_name)
+        if bundle_name is not None:
+            get_bundle(bundle_name)
         get_spec(args.spec)
     except ValueError as exc:
         raise CliError(str(exc)) from None
@@ -167,10 +171,11 @@ def _calibrate(args: argparse.Namespace) -> None:
         if not ok:
             raise CliError(f"cannot encode the overlay for {args.overlay}")
         _write_bytes(args.overlay, png.tobytes(), "overlay")
-    quality = result.quality
+    floor_t = result.uncertainty["floor_error_cm"]["T"]
     print(
-        f"calibrated {args.image}: fitness {result.fitness:.1f}, {result.generations} generations, "
-        f"{quality['inlier_fraction']:.0%} of visible line samples on edges, "
+        f"calibrated {args.image}: {result.verdict.label} ({'; '.join(result.verdict.reasons)}), "
+        f"{result.camera_model}, expected floor error at the T "
+        f"{'unknown' if floor_t is None else f'{floor_t:.1f} cm'}, "
         f"{result.timings_s['total']:.2f} s -> {args.out}"
     )
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from app.calib import background, court, edges, pipeline, synthetic
+from app.calib import background, court, edges, pipeline, scene, synthetic
 
 
 def _spurious_edges(estimate: np.ndarray, truth: np.ndarray) -> int:
@@ -37,7 +37,7 @@ def _through_camera_and_codec(frames: list[np.ndarray], seed: int) -> list[np.nd
     noisy = [np.clip(f + rng.normal(0, 2.0, f.shape), 0, 255).astype(np.uint8) for f in frames]
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "clip.mp4"
-        synthetic.write_video(noisy, path)
+        scene.write_video(noisy, path)
         capture = cv2.VideoCapture(str(path))
         decoded = []
         while True:
@@ -58,8 +58,8 @@ def evaluate(
     calibrate: bool,
 ) -> list[dict]:
     genome = synthetic.typical_target_camera(size)
-    frames = synthetic.render_clip_frames(genome, size, n_frames, seed, n_players=n_players)
-    truth = synthetic.render_court_image(genome, size, rng=seed)
+    frames = scene.render_clip_frames(genome, size, n_frames, seed, n_players=n_players)
+    truth = scene.render_court_image(genome, size, rng=seed)
     touched = np.zeros(truth.shape[:2], bool)
     for frame in frames:
         touched |= cv2.absdiff(frame, truth).max(axis=2) > 0

@@ -8,6 +8,15 @@ plus random false lines and salt), from a Table 3 "medium" start, with terminati
 generation cap. Reported: the median over repeats of elapsed / generations after a warm-up run,
 next to the paper's numbers, and the fitness alone (one compiled call for N genomes).
 
+Then the GA inside a real calibration, in the same run: `pipeline.calibrate(image, start_genome=
+start, bundle=<N = 16 default bundle>)` on a 1080p edge image (the typical camera's court with
+salt), its per-generation time as the product reports it (`timings_s["ga_per_generation_ms"]`),
+beside `run_ga` alone replayed on exactly the inputs the calibration gave it (same map, start,
+seed and bundle: the same generations, bit for bit) and beside the run_ga row above; the ratios
+say what the calibration adds per generation. The standard row is run again between the
+calibrations (the machine is shared: load changes over a minute). Once-per-process costs (loading
+the compiled code) are measured in a fresh process and printed apart.
+
 By default numba's cache is pointed at a fresh temporary directory, so the reported compile time is
 a real JIT compile; `--use-cache` keeps the normal on-disk cache (then it is mostly a cache load).
 """
@@ -15,13 +24,133 @@ a real JIT compile; `--use-cache` keeps the normal on-disk cache (then it is mos
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import multiprocessing
 import os
 import statistics
 import tempfile
 import time
+from collections.abc import Callable
+from typing import Any
+from unittest import mock
 
 PAPER_MS = {(800, 600): (5.2, 9.8, 21.8), (1920, 1080): (18.4, 32.9, 66.6)}
 POPULATION_SIZES = (8, 16, 32)
+CALIBRATION_SIZE = (1920, 1080)
+TARGET_RATIO = 1.2  # issue 6: GA per generation inside a calibration vs run_ga alone
+
+
+def capped_run(
+    fmap: Any, samples: Any, start: Any, bundle: Any, seed: int, generations: int
+) -> Any:
+    """run_ga stopped by the generation cap alone (the rows' setting): a GAResult."""
+    from app.calib.ga import run_ga
+
+    return run_ga(
+        fmap,
+        samples,
+        start,
+        bundle=bundle,
+        seed=seed,
+        stall_generations=10**9,
+        max_generations=generations,
+    )
+
+
+def calibration_case() -> tuple[Any, Any]:
+    """(1080p edge image, start camera) of the in-calibration row: the typical camera's court
+    with salt, and a Table 3 medium start (fixed seeds: every run measures the same case)."""
+    from app.calib import court, synthetic
+
+    target = synthetic.typical_target_camera(CALIBRATION_SIZE)
+    image = synthetic.add_noise(
+        synthetic.render_edge_image(target, court.court_model(), CALIBRATION_SIZE), "salt", 0
+    )
+    return image, synthetic.wiggle_camera(target, "medium", 0)
+
+
+@dataclasses.dataclass(frozen=True)
+class GACall:
+    """What the pipeline passed to run_ga and what it got back."""
+
+    args: tuple[Any, ...]
+    kwargs: dict[str, Any]
+    result: Any  # GAResult
+
+
+def calibrate_with_ga(image: Any, start: Any, seed: int) -> tuple[Any, GACall]:
+    """`pipeline.calibrate` with the default (N = 16) bundle: (its result, its run_ga call)."""
+    from app.calib import pipeline
+    from app.calib.ga import DEFAULT_BUNDLE, run_ga
+
+    calls: list[GACall] = []
+
+    def recording_run_ga(*args: Any, **kwargs: Any) -> Any:
+        result = run_ga(*args, **kwargs)
+        calls.append(GACall(args, dict(kwargs), result))
+        return result
+
+    with mock.patch.object(pipeline, "run_ga", recording_run_ga):
+        result = pipeline.calibrate(
+            image, start_genome=start, bundle=DEFAULT_BUNDLE.name, seed=seed
+        )
+    (call,) = calls
+    return result, call
+
+
+def fresh_process_calibration() -> dict[str, float]:
+    """One calibration with the GA in a fresh process (what `squashcal calibrate` pays): its
+    timings_s, the GA's own code load and run time per generation."""
+    image, start = calibration_case()
+    result, call = calibrate_with_ga(image, start, 0)
+    ga = call.result
+    return {
+        **{f"timings_s.{k}": v for k, v in result.timings_s.items()},
+        "run_ga code_load_s": ga.code_load_s,
+        "run_ga ms/gen": 1e3 * ga.elapsed_s / ga.generations,
+        "generations": float(ga.generations),
+    }
+
+
+def ga_in_calibration_rows(
+    repeats: int, standard_run: Callable[[int], tuple[float, int]]
+) -> list[tuple[str, float, float]]:
+    """(row, ms per generation, generations) medians over `repeats` calibrations: the product's
+    own figure (the whole GA stage over its generations), the run_ga call's own elapsed_s (the
+    run inside the calibration, progress callback included), run_ga alone replayed on the
+    calibration's inputs without the progress callback, and `standard_run(repeat)` (ms per
+    generation and generations of one run of the standard run_ga row) measured between them,
+    so that the shared machine's load weighs on all rows alike."""
+    from app.calib.ga import run_ga
+
+    image, start = calibration_case()
+    calibrate_with_ga(image, start, 0)  # warm-up: every stage's compiled code loaded
+    in_calibration, own, replayed, standard, generations = [], [], [], [], []
+    standard_generations = []
+    for repeat in range(repeats):
+        ms, count = standard_run(repeat)
+        standard.append(ms)
+        standard_generations.append(count)
+        result, call = calibrate_with_ga(image, start, repeat)
+        in_calibration.append(result.timings_s["ga_per_generation_ms"])
+        own.append(1e3 * call.result.elapsed_s / call.result.generations)
+        kwargs = {k: v for k, v in call.kwargs.items() if k != "progress"}
+        alone = run_ga(*call.args, **kwargs)
+        if alone.generations != result.generations:
+            raise RuntimeError("the replay did not repeat the calibration's GA run")
+        replayed.append(1e3 * alone.elapsed_s / alone.generations)
+        generations.append(result.generations)
+    n = statistics.median(generations)
+    return [
+        ("inside calibrate (timings_s)", statistics.median(in_calibration), n),
+        ("its run_ga call (elapsed_s)", statistics.median(own), n),
+        ("run_ga alone, same inputs", statistics.median(replayed), n),
+        (
+            "standard run_ga row, interleaved",
+            statistics.median(standard),
+            statistics.median(standard_generations),
+        ),
+    ]
 
 
 def _parse_args() -> argparse.Namespace:
@@ -78,14 +207,8 @@ def main() -> None:
             reused = []
             for repeat in range(args.repeats):
                 cpu_started = time.thread_time()
-                result = run_ga(
-                    fmap,
-                    samples,
-                    start,
-                    bundle=bundle,
-                    seed=args.seed + repeat,
-                    stall_generations=10**9,
-                    max_generations=args.generations,
+                result = capped_run(
+                    fmap, samples, start, bundle, args.seed + repeat, args.generations
                 )
                 cpu_ms.append(1e3 * (time.thread_time() - cpu_started) / result.generations)
                 per_generation_ms.append(1e3 * result.elapsed_s / result.generations)
@@ -104,6 +227,8 @@ def main() -> None:
                         pop, arrays.xyz, arrays.joins_next, fmap, ws, out, 0
                     )
                 fitness_ms.append(1e3 * (time.perf_counter() - t0) / calls)
+            if size == CALIBRATION_SIZE and n == 16:
+                standard_case = (fmap, samples, start, bundle)
             rows.append(
                 (
                     f"{size[0]}x{size[1]}",
@@ -143,6 +268,40 @@ def main() -> None:
     )
     cache_note = "on-disk cache" if args.use_cache else "fresh cache: full JIT compile"
     print(f"first run_ga call (JIT, {cache_note}): {compile_s:.1f} s, not included above")
+
+    # the GA inside a real calibration, same process and run as the rows above
+    def standard_run(repeat: int) -> tuple[float, int]:
+        """One run of the 1920x1080, N = 16 row above (same map, start, bundle, cap)."""
+        result = capped_run(*standard_case, args.seed + repeat, args.generations)
+        return 1e3 * result.elapsed_s / result.generations, result.generations
+
+    in_rows = ga_in_calibration_rows(args.repeats, standard_run)
+    print()
+    print(
+        f"GA inside a calibration: 1920x1080, N = 16, from a medium start; median of "
+        f"{args.repeats} repeats, each a run of the standard 1920x1080 N = 16 row, a "
+        f"calibration and its replay in turn; target <= {TARGET_RATIO}x"
+    )
+    header = f"{'':>32} {'ms/gen':>7} {'generations':>11} {'/ same inputs':>14} {'/ standard':>11}"
+    print(header)
+    print("-" * len(header))
+    same_inputs, standard = in_rows[2][1], in_rows[3][1]
+    for name, ms, generations in in_rows:
+        print(
+            f"{name:>32} {ms:>7.3f} {generations:>11.0f} {ms / same_inputs:>13.2f}x "
+            f"{ms / standard:>10.2f}x"
+        )
+    with multiprocessing.get_context("spawn").Pool(1) as pool:
+        fresh = pool.apply(fresh_process_calibration)
+    print(
+        "one calibration in a fresh process (what `squashcal calibrate` pays): "
+        + ", ".join(f"{k} {v:.3f}" for k, v in fresh.items())
+    )
+    fresh_ratio = fresh["timings_s.ga_per_generation_ms"] / fresh["run_ga ms/gen"]
+    print(
+        f"  its timings_s per generation / its run_ga call's own: {fresh_ratio:.2f}x "
+        f"(the difference is what the stage counts besides the generations)"
+    )
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
     print(
         f"single-threaded; cpus: {os.cpu_count()}; load average (1, 5, 15 min) at the end: {load}"

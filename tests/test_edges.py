@@ -2,7 +2,7 @@ import cv2
 import numpy as np
 import pytest
 
-from app.calib import edges, render, synthetic
+from app.calib import edges, render, scene
 from app.calib.court import court_model
 
 
@@ -28,7 +28,7 @@ def test_thresholds_follow_the_scene_texture():
 
 
 def test_grey_bgr_and_bgra_give_the_same_edges(target_genome):
-    image = synthetic.render_court_image(target_genome, (480, 270), rng=5)
+    image = scene.render_court_image(target_genome, (480, 270), rng=5)
     bgra = cv2.cvtColor(image, cv2.COLOR_BGR2BGRA)
     grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
     from_bgr = edges.extract_edges(image)
@@ -54,7 +54,7 @@ def test_is_edge_image(target_genome):
     ok, jpeg = cv2.imencode(".jpg", edge_image, [cv2.IMWRITE_JPEG_QUALITY, 95])
     assert ok and edges.is_edge_image(cv2.imdecode(jpeg, cv2.IMREAD_GRAYSCALE))
 
-    photo = synthetic.render_court_image(target_genome, (640, 360), rng=1)
+    photo = scene.render_court_image(target_genome, (640, 360), rng=1)
     assert not edges.is_edge_image(photo)
     assert not edges.is_edge_image(np.zeros((360, 640), np.uint8))  # nothing on it
     assert not edges.is_edge_image(np.full((360, 640), 255, np.uint8))  # all white

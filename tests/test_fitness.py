@@ -235,3 +235,22 @@ def test_literal_fitness_is_the_masked_sum(model, target):
     got = fitness.literal_fitness(target, model, fmap)
     assert got.shape == (1,)
     assert got[0] == pytest.approx(float(fmap[mask].sum(dtype=np.float64)))
+
+
+def test_scorer_scores_like_population_fitness_call_after_call(target, samples, cluttered_edges):
+    fmap = fitness.fitness_map(cluttered_edges)
+    scorer = fitness.Scorer(samples, fmap)
+    rng = np.random.default_rng(3)
+    pop = (
+        target
+        + rng.normal(0.0, 1.0, (6, 15)) * np.r_[[5.0] * 4, [0.05] * 3, [0.005] * 3, [0.0] * 5]
+    )
+    expected = fitness.population_fitness(pop, samples, fmap)
+    # the scratch buffers are shared between calls: a call must not leak into the next
+    for rows in (pop, pop[::-1], pop[2]):
+        got = scorer(rows)
+        assert np.array_equal(got, fitness.population_fitness(rows, samples, fmap))
+    assert np.array_equal(scorer(pop), expected)
+    assert len(set(expected.tolist())) == len(expected)  # the genomes really score differently
+    with pytest.raises(ValueError):
+        scorer(pop[:, :14])

@@ -1,4 +1,7 @@
+import subprocess
+import sys
 from math import comb
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +14,7 @@ from app.calib.ga import (
     Bundle,
     GAResult,
     bundle_fitness_map,
+    engine,
     get_bundle,
     run_ga,
 )
@@ -350,3 +354,54 @@ def test_run_ga_rejects_bad_input(scene):
         run_ga(fmap, samples, target, stall_generations=0)
     with pytest.raises(ValueError):
         run_ga(fmap, samples, target, time_budget_s=0.0)
+
+
+def test_a_run_loads_no_compiled_code_after_load_compiled_code(tmp_path):
+    """In a fresh process, the first run reports the code load apart (code_load_s) and the run
+    itself loads nothing more: every numba dispatcher it uses was loaded before its clock started.
+    A dispatcher missing from the warm-up would compile or load inside elapsed_s and fail here."""
+    script = tmp_path / "fresh.py"
+    script.write_text(
+        "import numba, numpy as np\n"
+        "from app.calib import camera, court, fitness, synthetic\n"
+        "from app.calib.ga import engine, operators, run_ga, bundle_fitness_map, get_bundle\n"
+        "def loaded():\n"
+        "    out = {}\n"
+        "    for module in (camera, court, fitness, engine, operators):\n"
+        "        for name, obj in vars(module).items():\n"
+        "            if isinstance(obj, numba.core.registry.CPUDispatcher):\n"
+        "                out[module.__name__ + '.' + name] = len(obj.signatures)\n"
+        "    return out\n"
+        "size = (480, 270)\n"
+        "model = court.court_model()\n"
+        "target = synthetic.typical_target_camera(size)\n"
+        "edges = synthetic.render_edge_image(target, model, size)\n"
+        "samples = court.sample_edges(model, court.spacing_for_image(size[0]))\n"
+        "load_s = engine.load_compiled_code()\n"
+        "before = loaded()\n"
+        "again = engine.load_compiled_code()\n"
+        "for name in ('n16-tdm-roulette-single-dist', 'n8-dm-tournament8-two-uniform'):\n"
+        "    bundle = get_bundle(name)\n"
+        "    result = run_ga(bundle_fitness_map(edges, bundle), samples, target, bundle=bundle,\n"
+        "                    max_generations=40)\n"
+        "    assert result.code_load_s == 0.0, result.code_load_s\n"
+        "after = loaded()\n"
+        "assert load_s > 0.0 and again == 0.0, (load_s, again)\n"
+        "grew = {k: (before.get(k), v) for k, v in after.items() if v != before.get(k)}\n"
+        "assert not grew, grew\n"
+        "print('ok')\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run(
+        [sys.executable, str(script)], cwd=root, capture_output=True, text=True, timeout=600
+    )
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-2000:]
+
+
+def test_code_load_is_reported_apart_once_loaded(scene):
+    target, edges, samples = scene
+    fmap = bundle_fitness_map(edges)
+    run_ga(fmap, samples, target, max_generations=2)
+    assert engine.load_compiled_code() == 0.0
+    result = run_ga(fmap, samples, target, max_generations=20)
+    assert result.code_load_s == 0.0 and result.elapsed_s > 0.0

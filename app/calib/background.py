@@ -19,14 +19,30 @@ The moving mask marks the pixels where the background cannot be trusted: many of
 disagree with it there, so the estimate may still show part of a player. Pixels a player only
 crossed are NOT in it: their background is clean and often holds the court lines the fit needs
 most (the T).
+
+Clips (`background_from_clip`): one pass over the clip, never holding it. Every frame is decoded
+(`grab`: a decoder can only start at keyframes, so seeking decodes from the keyframe before; 300
+seeks into a 60 s 1080p clip took 7-13 s where reading it through took ~2 s, bench.clip_background),
+but only samples `sample_interval_s` apart are converted to BGR and reduced to a view signature;
+`shots` splits the samples into shots of one static view. Full frames are kept only for the view on
+screen now (an evenly spread sample of at most 2 x `n_frames` frames) and for the longest other
+view (`n_frames` of them), so memory stays bounded whatever the clip's length or number of shots.
+The background is made from the longest view's frames alone (a view that returns after a replay
+counts with all its shots), so its moving mask is that view's too. The returned info says which
+time ranges were used.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import os
+import time
+from collections.abc import Iterable, Iterator, Sequence
+from typing import Any
 
 import cv2
 import numpy as np
+
+from app.calib.shots import ShotSegmenter, longest_view, view_durations_s, view_signature
 
 # A channel differing by more than this many grey levels between two frames is motion (sensor and
 # compression noise stay well below it; a player or a shadow is far above).
@@ -174,3 +190,227 @@ def background_from_frames(
     else:
         background = median_inlier_mean(stack)
     return background, untrusted_mask(stack, background)
+
+
+# ----------------------------------------------------------------------------------------------
+# Clips
+
+# (frame index from 0, timestamp in seconds, BGR uint8 frame)
+ClipSample = tuple[int, float, np.ndarray]
+
+# Pixels per second of clip converted to BGR and reduced to signatures: sets the sampling interval
+# by frame size (every frame of 640x360 up to 50 fps, every 5th of 1080p at 25 fps). Conversion and
+# signature cost ~1.4 ms per 1080p frame here: ~10 ms per second of clip at every size.
+SAMPLED_PIXELS_PER_S = 12e6
+# Samples at least this often: cuts are located to within one interval, and a replay or a
+# close-up lasts seconds.
+MAX_SAMPLE_INTERVAL_S = 0.5
+# Timestamps are rounded (often to milliseconds): a frame this close to the next sample time is due.
+TIMESTAMP_SLACK_S = 1e-3
+# Without a view on screen this long (unless the whole clip is one view) there is no background: a
+# shorter stretch is a transition or a glimpse, with too little player movement to remove them.
+MIN_STATIC_VIEW_S = 1.0
+
+
+class ClipError(ValueError):
+    """The clip gives no background; `code` names why ("corrupt_video", "no_static_view", ...)."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+    def __reduce__(self) -> tuple[type[ClipError], tuple[str, str]]:
+        # crosses process boundaries (workers, process pools) intact
+        return (ClipError, (self.code, str(self)))
+
+
+def sample_interval_s(width_px: int, height_px: int) -> float:
+    """Seconds between the samples of a clip of this frame size (see SAMPLED_PIXELS_PER_S)."""
+    if width_px < 1 or height_px < 1:
+        raise ValueError(f"frame size must be positive, got {width_px}x{height_px}")
+    return min(width_px * height_px / SAMPLED_PIXELS_PER_S, MAX_SAMPLE_INTERVAL_S)
+
+
+def video_samples(
+    path: str | os.PathLike[str],
+    interval_s: float | None = None,
+    max_duration_s: float | None = None,
+) -> Iterator[ClipSample]:
+    """Frames of a video file at least `interval_s` apart (default: by frame size), in order.
+
+    Every frame is decoded (`grab`), only the samples are converted (`retrieve`). Timestamps are
+    the decoder's (variable frame rates stay right), else index / frame rate. Frames after
+    `max_duration_s` are not read.
+    """
+    capture = cv2.VideoCapture(os.fspath(path))
+    try:
+        if not capture.isOpened():
+            raise ClipError("corrupt_video", "the video could not be opened (corrupt or truncated)")
+        if interval_s is None:
+            interval_s = sample_interval_s(
+                max(1, int(capture.get(cv2.CAP_PROP_FRAME_WIDTH))),
+                max(1, int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT))),
+            )
+        fps = capture.get(cv2.CAP_PROP_FPS)
+        index = 0
+        previous_s = -np.inf
+        next_sample_s = -np.inf
+        while capture.grab():
+            time_s = capture.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
+            if not (np.isfinite(time_s) and time_s > previous_s):
+                if not fps > 0:
+                    raise ClipError(
+                        "video_no_timestamps", "the video's frames have no timestamps or frame rate"
+                    )
+                time_s = index / fps
+            if max_duration_s is not None and time_s > max_duration_s:
+                break
+            if time_s >= next_sample_s - TIMESTAMP_SLACK_S:
+                ok, frame = capture.retrieve()
+                if ok and frame is not None and frame.size > 0:
+                    yield index, time_s, frame
+                    next_sample_s = time_s + interval_s
+            previous_s = time_s
+            index += 1
+    finally:
+        capture.release()
+
+
+class SpreadSample:
+    """At most `capacity` items spread evenly over a stream of unknown length.
+
+    Every `stride`-th item is kept; when full, every other kept item goes and the stride doubles.
+    """
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity = max(2, capacity)
+        self.items: list[tuple[int, np.ndarray]] = []
+        self.stride = 1
+        self.seen = 0
+
+    def add(self, item: tuple[int, np.ndarray]) -> None:
+        if self.seen % self.stride == 0:
+            self.items.append(item)
+            if len(self.items) >= self.capacity:
+                self.items = self.items[::2]
+                self.stride *= 2
+        self.seen += 1
+
+    def pick(self, n: int) -> list[tuple[int, np.ndarray]]:
+        """`n` of the kept items, evenly spread (all of them if there are no more)."""
+        if len(self.items) <= n:
+            return list(self.items)
+        picks = np.round(np.linspace(0, len(self.items) - 1, n)).astype(int)
+        return [self.items[i] for i in picks]
+
+    def shrink(self, n: int) -> None:
+        """Keep only `pick(n)`; later items still come at the current stride."""
+        self.items = self.pick(n)
+
+
+def background_from_clip(
+    source: str | os.PathLike[str] | Iterable[ClipSample],
+    n_frames: int = 15,
+    max_duration_s: float | None = None,
+    min_static_view_s: float = MIN_STATIC_VIEW_S,
+    method: str = "median_inlier_mean",
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """(background, moving_mask, info) of the longest static view of a clip.
+
+    source: a video file, or samples (frame index, timestamp s, BGR uint8 frame) in time order
+    (e.g. from `video_samples`; spaced as the caller likes; frames are kept as given, so each must
+    be its own array, not a buffer the caller reuses). Up to `n_frames` frames of the chosen
+    view, spread over its shots, make the background (`background_from_frames`).
+    info: the shots found and what was used; times in seconds, frame indices from 0, ranges
+    inclusive of their last frame: {"samples", "shots", "views", "cuts_s", "camera_moves_s",
+    "view_duration_s", "time_ranges_s": [[start, end], ...], "frame_ranges": [[first, last], ...],
+    "frames_used", "frame_indices_used", "timings_s": {"decode", "segmentation", "background"}}.
+    Raises ClipError when the clip has no frame or no view lasting `min_static_view_s`.
+    """
+    if n_frames < 1:
+        raise ValueError(f"n_frames must be >= 1, got {n_frames}")
+    if isinstance(source, str | os.PathLike):
+        samples: Iterator[ClipSample] = video_samples(source, max_duration_s=max_duration_s)
+    else:
+        samples = iter(source)
+    timings = {"decode": 0.0, "segmentation": 0.0, "background": 0.0}
+    segmenter = ShotSegmenter()
+    kept: dict[int, SpreadSample] = {}
+    first: tuple[int, float] | None = None
+    last = (0, 0.0)
+    try:
+        while True:
+            start = time.perf_counter()
+            sample = next(samples, None)
+            timings["decode"] += time.perf_counter() - start
+            if sample is None:
+                break
+            start = time.perf_counter()
+            index, time_s, frame = sample
+            if max_duration_s is not None and time_s > max_duration_s:
+                break
+            first = first or (index, time_s)
+            last = (index, time_s)
+            shot, new_shot = segmenter.add(index, time_s, view_signature(frame))
+            if new_shot:
+                # full frames only for the view on screen and the longest other one, whose
+                # sample can shrink to what the background takes: <= 3 n_frames frames in all
+                durations = view_durations_s(segmenter.shots, _frame_interval_s(first, last))
+                others = [view for view in durations if view != shot.view]
+                longest_other = max(others, key=durations.__getitem__) if others else None
+                for view in list(kept):
+                    if view == longest_other:
+                        kept[view].shrink(n_frames)
+                    elif view != shot.view:
+                        del kept[view]
+            kept.setdefault(shot.view, SpreadSample(2 * n_frames)).add((index, frame))
+            timings["segmentation"] += time.perf_counter() - start
+    finally:
+        close = getattr(samples, "close", None)
+        if close is not None:
+            close()
+    if first is None:
+        raise ClipError("video_no_frames", "the video has no decodable frame")
+    shots = segmenter.shots
+    frame_interval_s = _frame_interval_s(first, last)
+    durations = view_durations_s(shots, frame_interval_s)
+    # the longest view is one of the two kept: only the open view grew after the last choice
+    view = longest_view([s for s in shots if s.view in kept], frame_interval_s)
+    if len(shots) > 1 and durations[view] < min_static_view_s:
+        raise ClipError(
+            "no_static_view",
+            f"the clip has no static view of the court longer than {min_static_view_s:g} s "
+            f"(the longest lasts {durations[view]:.2f} s; {len(shots)} shots)",
+        )
+    picked = kept.pop(view).pick(n_frames)
+    kept.clear()
+    start = time.perf_counter()
+    background, moving_mask = background_from_frames([f for _, f in picked], method=method)
+    timings["background"] = time.perf_counter() - start
+    used = [s for s in shots if s.view == view]
+    info: dict[str, Any] = {
+        "samples": sum(s.n_samples for s in shots),
+        "shots": len(shots),
+        "views": len(durations),
+        "cuts_s": [_round_s(s.first_s) for s in shots if s.starts_with == "cut"],
+        "camera_moves_s": [_round_s(s.first_s) for s in shots if s.starts_with == "camera_move"],
+        "view_duration_s": _round_s(durations[view]),
+        "time_ranges_s": [
+            [_round_s(s.first_s), _round_s(s.last_s + frame_interval_s)] for s in used
+        ],
+        "frame_ranges": [[s.first_frame, s.last_frame] for s in used],
+        "frames_used": len(picked),
+        "frame_indices_used": [i for i, _ in picked],
+        "timings_s": {k: round(v, 4) for k, v in timings.items()},
+    }
+    return background, moving_mask, info
+
+
+def _frame_interval_s(first: tuple[int, float], last: tuple[int, float]) -> float:
+    """Mean seconds per frame between two (frame index, timestamp) samples; 0 for one frame."""
+    frames = last[0] - first[0]
+    return (last[1] - first[1]) / frames if frames > 0 else 0.0
+
+
+def _round_s(seconds: float) -> float:
+    return round(float(seconds), 3)

@@ -13,7 +13,7 @@ rational terms), so `cv2.projectPoints` with `to_opencv()` reproduces `project_p
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import cv2
@@ -65,10 +65,16 @@ def as_population(genomes: np.ndarray) -> np.ndarray:
 
 def angles_from_rotation(r: np.ndarray) -> tuple[float, float, float]:
     """Angles of one R = Rz(gamma) Ry(beta) Rx(alpha): (alpha, beta, gamma), beta in [-pi/2, pi/2]."""
-    beta = float(np.arcsin(np.clip(-r[2, 0], -1.0, 1.0)))
-    alpha = float(np.arctan2(r[2, 1], r[2, 2]))
-    gamma = float(np.arctan2(r[1, 0], r[0, 0]))
-    return alpha, beta, gamma
+    alpha, beta, gamma = angles_from_rotations(np.asarray(r)[None])[0]
+    return float(alpha), float(beta), float(gamma)
+
+
+def angles_from_rotations(r: np.ndarray) -> np.ndarray:
+    """`angles_from_rotation` of many rotations (N, 3, 3) -> (N, 3)."""
+    beta = np.arcsin(np.clip(-r[:, 2, 0], -1.0, 1.0))
+    alpha = np.arctan2(r[:, 2, 1], r[:, 2, 2])
+    gamma = np.arctan2(r[:, 1, 0], r[:, 0, 0])
+    return np.column_stack([alpha, beta, gamma])
 
 
 _PAPER_R = np.ascontiguousarray(PAPER_FROM_COURT_R)
@@ -234,6 +240,18 @@ def _undistort_njit(
 _FOLD_SEARCH_RADII = np.linspace(0.0, 4.0, 241)
 
 
+@numba.njit(cache=True)
+def _fold_radii_njit(pop: np.ndarray, radii: np.ndarray, out: np.ndarray) -> None:
+    for i in range(pop.shape[0]):
+        k1, k2, k3 = pop[i, 10], pop[i, 11], pop[i, 14]
+        out[i] = np.inf
+        for r in radii:
+            r2 = r * r
+            if 1.0 + r2 * (3.0 * k1 + r2 * (5.0 * k2 + 7.0 * k3 * r2)) <= 0.0:
+                out[i] = r
+                break
+
+
 def lens_fold_radii(genomes: np.ndarray) -> np.ndarray:
     """Undistorted normalised radius (N,) where each lens's radial distortion first turns back
     (d r_d / d r <= 0), +inf where it does not within 76 degrees of the axis.
@@ -241,13 +259,10 @@ def lens_fold_radii(genomes: np.ndarray) -> np.ndarray:
     Past that radius the model maps two directions onto one pixel: nothing beyond it is a real
     image of the court, so fits and drawings must ignore it.
     """
-    pop = as_population(genomes)
-    k1, k2, k3 = (pop[:, GENE[k], None] for k in ("k1", "k2", "k3"))
-    r2 = _FOLD_SEARCH_RADII**2
-    slope = 1.0 + r2 * (3.0 * k1 + r2 * (5.0 * k2 + 7.0 * k3 * r2))
-    turns = slope <= 0.0
-    first = np.argmax(turns, axis=1)
-    return np.where(turns.any(axis=1), _FOLD_SEARCH_RADII[first], np.inf)
+    pop = np.ascontiguousarray(as_population(genomes))
+    out = np.empty(len(pop))
+    _fold_radii_njit(pop, _FOLD_SEARCH_RADII, out)
+    return out
 
 
 def lens_fold_radius(genome: np.ndarray) -> float:
@@ -311,6 +326,21 @@ def floor_to_pixel(
     return project_visible(genome, points)
 
 
+def pixels_in_image(pixels: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """bool (M,): finite pixels (M, 2) inside the image, which spans -0.5 .. size - 0.5 (pixel
+    centres at integers)."""
+    px = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    width, height = image_size
+    with np.errstate(invalid="ignore"):
+        return (
+            np.isfinite(px).all(axis=1)
+            & (px[:, 0] >= -0.5)
+            & (px[:, 0] <= width - 0.5)
+            & (px[:, 1] >= -0.5)
+            & (px[:, 1] <= height - 0.5)
+        )
+
+
 def to_opencv(genome: np.ndarray, image_size: tuple[int, int] | None = None) -> dict[str, Any]:
     """The OpenCV JSON form of the design brief, in the court frame."""
     g = as_population(genome)[0]
@@ -369,6 +399,16 @@ def from_opencv(camera: Mapping[str, Any]) -> np.ndarray:
     return np.array(
         [k[0, 0], k[1, 1], k[0, 2], k[1, 2], *t_paper, alpha, beta, gamma, k1, k2, p1, p2, k3]
     )
+
+
+def check_image_size(image_size: Sequence[int]) -> tuple[int, int]:
+    """(width, height) as ints, at least 2 x 2; ValueError otherwise."""
+    if len(image_size) != 2:
+        raise ValueError(f"image_size must be (width, height), got {image_size}")
+    width, height = int(image_size[0]), int(image_size[1])
+    if width < 2 or height < 2:
+        raise ValueError(f"image_size must be at least 2 x 2, got {image_size}")
+    return width, height
 
 
 def parse_image_size(value: Any) -> tuple[int, int]:

@@ -71,6 +71,10 @@ class CourtModel:
     def keypoints(self) -> dict[str, np.ndarray]:
         return dict(zip(self.node_names, self.nodes, strict=True))
 
+    def painted(self) -> np.ndarray:
+        """bool (E,): which edges are painted lines (the rest are junctions of surfaces)."""
+        return np.array([name in PAINTED_EDGES for name in self.edge_names])
+
     def subset(self, edge_names: list[str] | tuple[str, ...]) -> CourtModel:
         """The same court restricted to some edges (e.g. the ones visible in an image)."""
         unknown = set(edge_names) - set(self.edge_names)
@@ -84,6 +88,26 @@ class CourtModel:
             self.edges[keep],
             tuple(n for n, k in zip(self.edge_names, keep, strict=True) if k),
         )
+
+
+# Edges that are painted 50 mm lines; the rest of the model is wall/floor and wall/wall junctions.
+PAINTED_EDGES: tuple[str, ...] = (
+    "short_left_outer",
+    "short_left_inner",
+    "short_right_inner",
+    "short_right_outer",
+    "half_court",
+    "box_left_side",
+    "box_left_back",
+    "box_right_side",
+    "box_right_back",
+    "tin",
+    "service",
+    "front_out",
+    "left_out",
+    "right_out",
+    "back_out",
+)
 
 
 def court_model(spec: CourtSpec | str = "wsf") -> CourtModel:

@@ -7,7 +7,9 @@ floor, wall or crowd, not court lines), and the thresholds sit at fixed multiple
 absolute floor so a flat image does not turn its sensor noise into edges. Painted court lines
 (contrast of tens of grey levels over ~2 px) are well above both.
 
-`extract_edges` is the one entry point the pipeline calls; a better extractor replaces its body.
+The calibration itself fits richer evidence (`lines.line_evidence`: painted-line ridges and
+junction steps); `extract_edges` is the paper's own input, kept for the paper's protocol and for
+comparisons (bench.background_methods).
 """
 
 from __future__ import annotations

@@ -307,21 +307,34 @@ def check_fitness_map(fmap: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(lookup, dtype=np.float32)
 
 
+class Scorer:
+    """Population fitness on one map and one sample set, with the samples laid out and the scratch
+    buffers made once: optimisers that score many small populations (or single genomes) on the
+    same map pay that set-up once instead of on every call."""
+
+    def __init__(self, samples: LineSamples, fmap: np.ndarray) -> None:
+        self.arrays = sample_arrays(samples)
+        self.fmap = check_fitness_map(fmap)
+        self.workspace = make_workspace(self.arrays.xyz.shape[1])
+
+    def __call__(self, pop: np.ndarray) -> np.ndarray:
+        """Fitness (N,) float64 of a population (N, 15) or one genome (15,)."""
+        population = np.ascontiguousarray(as_population(pop))
+        out = np.empty(population.shape[0])
+        population_fitness_njit(
+            population, self.arrays.xyz, self.arrays.joins_next, self.fmap, self.workspace, out, 0
+        )
+        return out
+
+
 def population_fitness(pop: np.ndarray, samples: LineSamples, fmap: np.ndarray) -> np.ndarray:
     """Fitness (N,) float64 of a population (N, 15) (or one genome (15,)) on a fitness map.
 
     Sum over consecutive samples within each court edge of 0.5 (F_i + F_i+1) max(|du|, |dv|), with
     bilinear lookups; the parts of sub-segments outside the image count 0, and sub-segments with a
-    sample behind the camera (depth <= MIN_DEPTH_M) count 0.
+    sample behind the camera (depth <= MIN_DEPTH_M) count 0. (Many calls on one map: `Scorer`.)
     """
-    population = np.ascontiguousarray(as_population(pop))
-    arrays = sample_arrays(samples)
-    out = np.empty(population.shape[0])
-    workspace = make_workspace(arrays.xyz.shape[1])
-    population_fitness_njit(
-        population, arrays.xyz, arrays.joins_next, check_fitness_map(fmap), workspace, out, 0
-    )
-    return out
+    return Scorer(samples, fmap)(pop)
 
 
 def literal_fitness(pop: np.ndarray, model: CourtModel, fmap: np.ndarray) -> np.ndarray:

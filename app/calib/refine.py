@@ -1,0 +1,382 @@
+"""Sub-pixel refinement of a camera on the line evidence, the choice of camera model, and how well
+the result is pinned down.
+
+Residual of a court sample: project it, take the nearest evidence pixel of the right kind (ridge
+for a painted line, ridge or step for a junction), and measure the signed distance from the
+projection to that evidence's own line (its sub-pixel position and normal): point-to-line, so a
+projection sliding along a line costs nothing and the pixel grid does not bias axis-aligned
+lines. Evidence running another way than the model line (> FIT_MAX_ANGLE_RAD) is no match.
+Residuals are robust: tau r / sqrt(r^2 + tau^2) (quadratic near a line, at most tau far from it),
+and samples outside the image, on ignored pixels or with no match cost tau, so a camera cannot
+gain by pushing lines out of the picture. Levenberg-Marquardt (MINPACK) minimises their squares
+with forward-difference Jacobians computed for all perturbed cameras in one compiled call.
+
+Camera models (`MODELS`): one view of a court pins intrinsics weakly, so the default is square
+pixels, principal point at the image centre and one radial term; more terms (k2, a free aspect
+ratio, a free principal point) are added only when the evidence demands them: the fit must
+improve by more than BIC's penalty computed with an effective number of independent residuals
+(neighbouring samples along a line are not independent).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from scipy import optimize
+
+from app.calib import camera
+from app.calib.camera import GENE, project_point_njit
+from app.calib.court import CourtModel, sample_edges
+from app.calib.lines import EvidenceMaps
+
+FIT_MAX_ANGLE_RAD = np.deg2rad(30.0)
+MIN_DEPTH_M = 0.05
+# Samples this many px apart along a line count as one independent residual (edge positions are
+# smoothed over a few pixels, and systematic deviations of a real court run along whole lines).
+CORRELATION_LENGTH_PX = 12.0
+FD_RELATIVE_STEP = 1e-3
+
+
+@dataclass(frozen=True)
+class FitSamples:
+    """Court samples to fit: points (M, 3), unit edge directions (M, 3), `use_ridge` (M,) bool
+    (painted lines match ridges only), `edge` (M,) court edge index, spacing (m)."""
+
+    points: np.ndarray
+    directions: np.ndarray
+    use_ridge: np.ndarray
+    edge: np.ndarray
+    spacing_m: float
+
+
+def fit_samples(model: CourtModel, spacing_m: float, ridges_for_painted: bool = True) -> FitSamples:
+    samples = sample_edges(model, spacing_m)
+    counts = np.diff(samples.offsets)
+    edge = np.repeat(np.arange(len(model.edges)), counts)
+    vec = model.nodes[model.edges[:, 1]] - model.nodes[model.edges[:, 0]]
+    unit = vec / np.linalg.norm(vec, axis=1, keepdims=True)
+    painted = model.painted()[edge] if ridges_for_painted else np.zeros(len(edge), dtype=bool)
+    return FitSamples(
+        points=np.ascontiguousarray(samples.points),
+        directions=np.ascontiguousarray(unit[edge]),
+        use_ridge=painted,
+        edge=edge.astype(np.int64),
+        spacing_m=float(spacing_m),
+    )
+
+
+def spacing_for_width(image_width: int) -> float:
+    """Sample spacing (m): ~1600 samples on the whole court at 1920 px wide, fewer when smaller."""
+    return 0.07 * 1920.0 / float(max(image_width, 320))
+
+
+@numba.njit(cache=True)
+def _residuals_njit(
+    pop: np.ndarray,
+    points: np.ndarray,
+    directions: np.ndarray,
+    use_ridge: np.ndarray,
+    fold_tan2: np.ndarray,
+    near_ridge: np.ndarray,
+    near_any: np.ndarray,
+    ev_points: np.ndarray,
+    ev_normals: np.ndarray,
+    ignore: np.ndarray,
+    tau: float,
+    max_sin: float,
+    out: np.ndarray,
+    raw: np.ndarray,
+) -> None:
+    """Robust residuals (N, M) into `out`; signed raw point-to-line distances into `raw` (NaN
+    where the sample is not matched)."""
+    h, w = ignore.shape
+    r = np.empty((3, 3))
+    t = np.empty(3)
+    for i in range(pop.shape[0]):
+        g = pop[i]
+        camera.extrinsics_njit(g, r, t)
+        for j in range(points.shape[0]):
+            out[i, j] = tau
+            raw[i, j] = np.nan
+            x, y, z = points[j, 0], points[j, 1], points[j, 2]
+            u, v, depth = project_point_njit(r, t, g, x, y, z)
+            if depth <= MIN_DEPTH_M:
+                continue
+            xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
+            yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
+            if xc * xc + yc * yc > fold_tan2[i] * depth * depth:
+                continue
+            if not (0.0 <= u <= w - 1.0 and 0.0 <= v <= h - 1.0):
+                continue
+            iu = int(u + 0.5)
+            iv = int(v + 0.5)
+            if ignore[iv, iu]:
+                continue
+            k = near_ridge[iv, iu] if use_ridge[j] else near_any[iv, iu]
+            if k < 0:
+                continue
+            u2, v2, _ = project_point_njit(
+                r,
+                t,
+                g,
+                x + 0.02 * directions[j, 0],
+                y + 0.02 * directions[j, 1],
+                z + 0.02 * directions[j, 2],
+            )
+            du = u2 - u
+            dv = v2 - v
+            step = np.sqrt(du * du + dv * dv)
+            nx = ev_normals[k, 0]
+            ny = ev_normals[k, 1]
+            if step == 0.0 or abs(nx * du + ny * dv) > max_sin * step:
+                continue
+            d = nx * (u - ev_points[k, 0]) + ny * (v - ev_points[k, 1])
+            raw[i, j] = d
+            out[i, j] = tau * d / np.sqrt(d * d + tau * tau)
+
+
+def residuals(
+    genomes: np.ndarray, samples: FitSamples, maps: EvidenceMaps, tau_px: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Robust residuals and raw signed distances (px), (N, M) for a population or (M,) for one."""
+    single = np.ndim(genomes) == 1
+    pop = np.ascontiguousarray(camera.as_population(genomes))
+    out = np.empty((len(pop), len(samples.points)))
+    raw = np.empty_like(out)
+    fold = camera.lens_fold_radii(pop)
+    _residuals_njit(
+        pop,
+        samples.points,
+        samples.directions,
+        samples.use_ridge,
+        np.where(np.isfinite(fold), fold**2, 1e12),
+        maps.near_ridge,
+        maps.near_any,
+        maps.points,
+        maps.normals,
+        maps.ignore.view(np.uint8),
+        float(tau_px),
+        float(np.sin(FIT_MAX_ANGLE_RAD)),
+        out,
+        raw,
+    )
+    return (out[0], raw[0]) if single else (out, raw)
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """Which genes a fit may move, as (gene names moved together, step unit) columns."""
+
+    name: str
+    columns: tuple[tuple[tuple[str, ...], float], ...]
+
+    def directions(self) -> np.ndarray:
+        out = np.zeros((camera.N_GENES, len(self.columns)))
+        for k, (genes, unit) in enumerate(self.columns):
+            for gene in genes:
+                out[GENE[gene], k] = unit
+        return out
+
+    @property
+    def n_params(self) -> int:
+        return len(self.columns)
+
+
+_POSE = (
+    (("t_x",), 0.02),
+    (("t_y",), 0.02),
+    (("t_z",), 0.05),
+    (("alpha",), 2e-3),
+    (("beta",), 2e-3),
+    (("gamma",), 2e-3),
+)
+_FOCAL = (("f_u", "f_v"), 10.0)
+_K1 = (("k1",), 0.01)
+PINHOLE = CameraModel("pinhole", (_FOCAL, *_POSE))
+BASE = CameraModel("pinhole+k1", (_FOCAL, *_POSE, _K1))
+EXTENSIONS: dict[str, tuple[tuple[tuple[str, ...], float], ...]] = {
+    "k2": ((("k2",), 0.01),),
+    "aspect": ((("f_v",), 10.0),),
+    "centre": ((("c_u",), 5.0), (("c_v",), 5.0)),
+}
+
+
+def model_with(extensions: tuple[str, ...]) -> CameraModel:
+    columns = list(BASE.columns)
+    for name in extensions:
+        columns.extend(EXTENSIONS[name])
+    label = "+".join([BASE.name, *extensions]) if extensions else BASE.name
+    return CameraModel(label, tuple(columns))
+
+
+@dataclass(frozen=True)
+class Fit:
+    genome: np.ndarray
+    model: CameraModel
+    cost: float  # mean squared robust residual / tau^2 (0 perfect, 1 nothing matched)
+    rms_px: float  # RMS of the matched raw distances within tau
+    matched: int  # samples matched within tau
+    jacobian: np.ndarray  # (M, K) of the robust residuals at the solution
+    residual: np.ndarray  # (M,) robust residuals at the solution
+    tau_px: float
+
+
+def refine(
+    genome: np.ndarray,
+    samples: FitSamples,
+    maps: EvidenceMaps,
+    tau_px: float,
+    model: CameraModel = BASE,
+    max_evaluations: int = 300,
+) -> Fit:
+    """Levenberg-Marquardt fit of the camera along `model`'s columns, from `genome`."""
+    start = np.asarray(genome, dtype=np.float64).copy()
+    directions = model.directions()
+    n = directions.shape[1]
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        return residuals(start + directions @ x, samples, maps, tau_px)[0]
+
+    def jac(x: np.ndarray) -> np.ndarray:
+        steps = FD_RELATIVE_STEP * np.where(x >= 0.0, 1.0, -1.0) * np.maximum(1.0, np.abs(x))
+        shifted = x[None, :] + np.diag(steps)
+        cameras = start[None, :] + np.vstack([x[None, :], shifted]) @ directions.T
+        values, _ = residuals(cameras, samples, maps, tau_px)
+        return ((values[1:] - values[0]) / steps[:, None]).T
+
+    fit = optimize.least_squares(
+        fun, np.zeros(n), jac=jac, method="lm", max_nfev=max(2, max_evaluations // (n + 1))
+    )
+    result = start + directions @ fit.x
+    return _summarise(result, samples, maps, tau_px, model, jac(fit.x), fit.fun)
+
+
+def _summarise(
+    genome: np.ndarray,
+    samples: FitSamples,
+    maps: EvidenceMaps,
+    tau_px: float,
+    model: CameraModel,
+    jacobian: np.ndarray,
+    residual: np.ndarray,
+) -> Fit:
+    robust, raw = residuals(genome, samples, maps, tau_px)
+    inside = np.isfinite(raw) & (np.abs(raw) <= tau_px)
+    rms = float(np.sqrt(np.mean(raw[inside] ** 2))) if inside.any() else float("inf")
+    return Fit(
+        genome=genome,
+        model=model,
+        cost=float(np.mean(robust**2) / tau_px**2),
+        rms_px=rms,
+        matched=int(inside.sum()),
+        jacobian=jacobian,
+        residual=robust,
+        tau_px=tau_px,
+    )
+
+
+def refine_coarse_to_fine(
+    genome: np.ndarray,
+    samples: FitSamples,
+    maps: EvidenceMaps,
+    taus_px: tuple[float, ...],
+    model: CameraModel = BASE,
+    max_evaluations: int = 300,
+) -> Fit:
+    """`refine` at shrinking truncations: wide to pull lines onto their evidence, tight to let
+    only the evidence on the lines decide the sub-pixel position."""
+    fit: Fit | None = None
+    current = np.asarray(genome, dtype=np.float64)
+    for tau in taus_px:
+        fit = refine(current, samples, maps, tau, model, max_evaluations)
+        current = fit.genome
+    assert fit is not None
+    return fit
+
+
+def effective_samples(fit: Fit, samples: FitSamples, image_width: int) -> float:
+    """Matched samples, discounted for correlation along lines."""
+    sample_px = max(samples.spacing_m * image_width / 19.2, 1.0)  # ~px between samples
+    return fit.matched * min(1.0, sample_px / CORRELATION_LENGTH_PX)
+
+
+def bic(fit: Fit, n_eff: float) -> float:
+    """BIC of a fit with the robust cost as residual sum (up to constants)."""
+    n = max(n_eff, fit.model.n_params + 2.0)
+    return n * np.log(max(fit.cost, 1e-12)) + fit.model.n_params * np.log(n)
+
+
+def select_model(
+    base_fit: Fit,
+    samples: FitSamples,
+    maps: EvidenceMaps,
+    image_width: int,
+) -> Fit:
+    """Add model extensions (k2, aspect, centre) one at a time while BIC improves."""
+    best = base_fit
+    n_eff = effective_samples(base_fit, samples, image_width)
+    chosen: tuple[str, ...] = ()
+    remaining = list(EXTENSIONS)
+    while remaining:
+        trials = []
+        for name in remaining:
+            candidate_model = model_with((*chosen, name))
+            fit = refine(best.genome, samples, maps, best.tau_px, candidate_model)
+            trials.append((bic(fit, n_eff), name, fit))
+        score, name, fit = min(trials, key=lambda item: item[0])
+        if score >= bic(best, n_eff):
+            break
+        best = fit
+        chosen = (*chosen, name)
+        remaining.remove(name)
+    return best
+
+
+def parameter_covariance(fit: Fit, samples: FitSamples, image_width: int) -> np.ndarray:
+    """Covariance (15, 15) of the genome: sigma^2 (J^T J)^-1 mapped through the model's columns,
+    sigma^2 from the matched residuals, inflated for correlation along lines."""
+    j = fit.jacobian
+    directions = fit.model.directions()
+    inside = np.abs(fit.residual) < 0.999 * fit.tau_px
+    if inside.sum() <= fit.model.n_params:
+        return np.full((camera.N_GENES, camera.N_GENES), np.inf)
+    sigma2 = float(np.sum(fit.residual[inside] ** 2) / (inside.sum() - fit.model.n_params))
+    sample_px = max(samples.spacing_m * image_width / 19.2, 1.0)
+    inflation = max(1.0, CORRELATION_LENGTH_PX / sample_px)
+    jtj = j[inside].T @ j[inside]
+    try:
+        cov_x = np.linalg.inv(jtj) * sigma2 * inflation
+    except np.linalg.LinAlgError:
+        return np.full((camera.N_GENES, camera.N_GENES), np.inf)
+    return directions @ cov_x @ directions.T
+
+
+def floor_error_cm(
+    genome: np.ndarray, covariance: np.ndarray, floor_points_m: np.ndarray
+) -> np.ndarray:
+    """Expected floor error (cm, RMS) at court floor points (K, 2): how far the floor position
+    of the pixel where each point appears may be off, given the camera's covariance."""
+    g = np.asarray(genome, dtype=np.float64)
+    if not np.all(np.isfinite(covariance)):
+        return np.full(len(floor_points_m), np.inf)
+    pixels = camera.floor_to_pixel(g, floor_points_m)
+    base, status = camera.pixel_to_floor(g, pixels)
+    jac = np.zeros((len(floor_points_m), 2, camera.N_GENES))
+    scales = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    for k in range(camera.N_GENES):
+        if scales[k] == 0.0:
+            continue
+        step = 1e-3 * scales[k]
+        moved = g.copy()
+        moved[k] += step
+        shifted, _ = camera.pixel_to_floor(moved, pixels)
+        jac[:, :, k] = (shifted - base) / step
+    out = np.full(len(floor_points_m), np.inf)
+    for i in range(len(floor_points_m)):
+        if status[i] != camera.RAY_OK or not np.all(np.isfinite(jac[i])):
+            continue
+        cov_xy = jac[i] @ covariance @ jac[i].T
+        out[i] = 100.0 * float(np.sqrt(max(np.trace(cov_xy), 0.0)))
+    return out

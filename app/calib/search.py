@@ -1,0 +1,1515 @@
+"""A global search for the camera with no start: hypotheses from line assignments, verified on the
+evidence.
+
+1. Vanishing groups. Court lines run in three directions; in the image the lines of one direction
+   meet in a vanishing point (possibly at infinity). `vanishing_groups` finds up to three groups
+   of image lines by consensus over pairwise intersections.
+2. Floor hypotheses. Two lines of one group taken as two floor lines across the court (y constant:
+   front junction, short line, box backs, back junction) and two of another as two floor lines
+   along it (x constant: side junctions, box sides, half-court line) meet in four image points of
+   a known floor rectangle, up to the assignment: a homography. With square pixels and the
+   principal point at the image centre, a homography of a plane fixes the focal length and the
+   pose, and over-determines them: the image quadrangle says what shape (aspect ratio) its floor
+   rectangle has, and only assignments of model lines with that shape survive
+   (`floor_hypotheses`). All image quadruples and all assignments are checked in one compiled
+   call.
+3. Verification (`verify`): every surviving camera projects the whole court model (floor and
+   walls) and is scored by the length of its lines that land on evidence running the same way,
+   minus a share of the length that lands on nothing. The best few distinct cameras go on to the
+   refinement.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import cv2
+import numba
+import numpy as np
+
+from app.calib import camera
+from app.calib.camera import extrinsics_njit, project_point_njit
+from app.calib.court import COURT_SPECS, CourtModel, court_model, sample_edges
+from app.calib.lines import EvidenceMaps
+from app.calib.segments import ImageLines, Undistortion
+
+# Vanishing groups: lines considered, and the angle (rad) by which a line may miss a vanishing
+# point, on top of what its length explains (endpoints good to ~1.5 px).
+VANISHING_MAX_LINES = 100
+VANISHING_MAX_ANGLE_RAD = np.deg2rad(1.5)
+VANISHING_ENDPOINT_PX = 1.5
+# Lines per group taken into quadruples.
+QUADRUPLE_LINES_PER_GROUP = 10
+# Two groups can be the court's two floor directions only if their vanishing points allow it
+# (see `could_be_orthogonal`); the cosine margin allows for a principal point off centre.
+ORTHOGONAL_VP_MAX_COS = 0.25
+# ... and for a principal point anywhere in the picture (a cropped photo), given a vertical
+OFF_CENTRE_VP_MAX_COS = 0.8
+# A quadruple spanning less than this share of the image area pins a camera too poorly.
+MIN_QUAD_AREA_SHARE = 0.002
+# Consistency of a homography with a rotation: |cos| of the angle between the floor axes, and
+# relative difference of their lengths.
+MAX_AXES_COS = 0.06
+MAX_AXES_LENGTH_RATIO = 0.10
+# Plausible cameras, from how courts are filmed (not from any image): focal length (share of
+# the image width: a 120-degree action camera to a long broadcast zoom), height above the floor
+# (m), distance from the court (m), and how the camera is held: level (roll), looking at the
+# court (between a little above the horizon and steeply down).
+FOCAL_RANGE_OF_WIDTH = (0.25, 12.0)
+HEIGHT_RANGE_M = (0.3, 25.0)
+MAX_DISTANCE_FROM_COURT_M = 45.0
+MAX_ROLL_RAD = np.deg2rad(15.0)
+MAX_TILT_UP_RAD = np.deg2rad(15.0)
+MAX_TILT_DOWN_RAD = np.deg2rad(75.0)
+# Verification: sample spacing (m), distance tolerance (px at 1920 px wide) for ranking raw
+# hypotheses (a homography from four lines lands a few pixels off) and, after polishing, for
+# choosing among them; direction tolerance.
+VERIFY_SPACING_M = 0.25
+RANK_TOLERANCE_PX_AT_1920 = 19.2
+VERIFY_TOLERANCE_PX_AT_1920 = 5.0
+VERIFY_MAX_ANGLE_RAD = np.deg2rad(20.0)
+# The most line length (share of the image diagonal) one verification sample may stand for.
+MAX_SAMPLE_SHARE_OF_DIAGONAL = 0.05
+# Probability that a court line in view (not on ignored pixels) shows as evidence within the
+# tolerance, by what the line is: painted floor lines and side-wall out lines nearly always show;
+# the service line and front-wall out line mostly (the out line is often at the picture's top
+# edge); the tin is a board, often covered by adverts; junctions of glass walls or in shadow
+# often do not show; the back wall's line and corners are seen through or on glass, close to
+# the camera, and rarely show. Priors from how courts look, not fitted to any image.
+P_HIT_BY_EDGE = {
+    "floor_painted": 0.7,
+    "side_out": 0.6,
+    "service": 0.6,
+    "front_out": 0.5,
+    "tin": 0.35,
+    "floor_junction": 0.45,
+    "front_corner": 0.35,
+    "back_wall": 0.25,
+}
+
+
+def edge_hit_probability(model: CourtModel) -> np.ndarray:
+    """P_HIT_BY_EDGE for each edge of the model (E,)."""
+    out = np.empty(len(model.edges))
+    for e, name in enumerate(model.edge_names):
+        if name.startswith("back_") and name not in ("back_floor_left", "back_floor_right"):
+            kind = "back_wall"
+        elif name in ("left_out", "right_out"):
+            kind = "side_out"
+        elif name in ("service", "front_out", "tin"):
+            kind = name
+        elif name.startswith("front_") and "corner" in name:
+            kind = "front_corner"
+        elif model.painted()[e]:
+            kind = "floor_painted"
+        else:
+            kind = "floor_junction"
+        out[e] = P_HIT_BY_EDGE[kind]
+    return out
+# Distinct hypotheses: reference floor points must differ by this share of the image width.
+DISTINCT_SHARE_OF_WIDTH = 0.02
+
+
+@dataclass(frozen=True)
+class VanishingGroup:
+    """Lines (indices into ImageLines) through one vanishing point `point` (homogeneous (3,))."""
+
+    point: np.ndarray
+    lines: np.ndarray
+    support_px: float
+
+
+def _line_directions(lines: ImageLines) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    mid = lines.extent.mean(axis=1)
+    direction = np.column_stack([-lines.normal[:, 1], lines.normal[:, 0]])
+    length = np.linalg.norm(lines.extent[:, 1] - lines.extent[:, 0], axis=1)
+    return mid, direction, length
+
+
+def _consistency_matrix(
+    vps: np.ndarray, mid: np.ndarray, direction: np.ndarray, length: np.ndarray
+) -> np.ndarray:
+    """bool (P, L): which lines point at which homogeneous vanishing points (P, 3)."""
+    norm_xy = np.linalg.norm(vps[:, :2], axis=1)
+    at_infinity = np.abs(vps[:, 2]) < 1e-9 * np.maximum(norm_xy, 1e-300)
+    safe_w = np.where(at_infinity, 1.0, vps[:, 2])
+    finite_pt = vps[:, :2] / safe_w[:, None]
+    towards = finite_pt[:, None, :] - mid[None, :, :]
+    towards = np.where(
+        at_infinity[:, None, None],
+        (vps[:, None, :2] / np.maximum(norm_xy, 1e-300)[:, None, None]),
+        towards,
+    )
+    towards /= np.maximum(np.linalg.norm(towards, axis=2, keepdims=True), 1e-9)
+    sin_angle = np.abs(
+        towards[:, :, 0] * direction[None, :, 1] - towards[:, :, 1] * direction[None, :, 0]
+    )
+    allowed = VANISHING_MAX_ANGLE_RAD + np.arctan(2.0 * VANISHING_ENDPOINT_PX / np.maximum(length, 1))
+    return sin_angle <= np.sin(allowed)[None, :]
+
+
+def vanishing_groups(lines: ImageLines, n_groups: int = 5) -> list[VanishingGroup]:
+    """Up to `n_groups` groups of lines sharing a vanishing point, strongest support first.
+
+    Found greedily (each new point by consensus among the lines not yet explained, over the
+    intersections of all pairs of them), then every group takes all lines through its point: a
+    line may belong to two groups (the half-court line of a centred camera runs through the
+    points of the floor's and of the walls' directions). Court lines run in more than three
+    image directions: the side walls' out lines slope, so they meet elsewhere than the floor's
+    lines along the court.
+    """
+    count = min(len(lines), VANISHING_MAX_LINES)
+    if count < 2:
+        return []
+    homog = lines.homogeneous()[:count]
+    mid, direction, length = _line_directions(lines)
+    mid, direction, length = mid[:count], direction[:count], length[:count]
+    support = lines.support_px[:count]
+    ii, jj = np.triu_indices(count, 1)
+    pair_vps = np.cross(homog[ii], homog[jj])
+    valid = np.any(pair_vps != 0, axis=1)
+    pair_vps = pair_vps[valid]
+    consistent = _consistency_matrix(pair_vps, mid, direction, length)
+    free = np.ones(count, dtype=bool)
+    points: list[np.ndarray] = []
+    for _ in range(n_groups):
+        members = consistent & free[None, :]
+        scores = members.astype(np.float64) @ support
+        enough = members.sum(axis=1) >= 2
+        if not enough.any():
+            break
+        best = int(np.argmax(np.where(enough, scores, -1.0)))
+        vp = pair_vps[best]
+        chosen = members[best]
+        # refit the point to its members: least squares over a x + b y + c w = 0
+        _, _, vt = np.linalg.svd(homog[chosen] * support[chosen, None])
+        refit = vt[-1]
+        refit_members = _consistency_matrix(refit[None, :], mid, direction, length)[0] & free
+        if refit_members.sum() >= 2:
+            vp = refit
+        points.append(vp)
+        free &= ~_consistency_matrix(vp[None, :], mid, direction, length)[0]
+    groups = []
+    all_members = _consistency_matrix(np.array(points), mid, direction, length) if points else []
+    for vp, members in zip(points, all_members, strict=True):
+        idx = np.flatnonzero(members)
+        groups.append(VanishingGroup(vp, idx, float(support[idx].sum())))
+    return groups
+
+
+def floor_line_values(model: CourtModel) -> tuple[np.ndarray, np.ndarray]:
+    """(y values of floor lines across the court, x values of floor lines along it), metres."""
+    nodes = {name: model.node(name) for name in model.node_names}
+    across = sorted(
+        {
+            float(nodes["floor_front_left"][1]),
+            float(nodes["T"][1]),
+            float(nodes["box_left_inner_back"][1]),
+            float(nodes["floor_back_left"][1]),
+        }
+    )
+    along = sorted(
+        {
+            float(nodes["floor_front_left"][0]),
+            float(nodes["box_left_short"][0]),
+            float(nodes["T"][0]),
+            float(nodes["box_right_short"][0]),
+            float(nodes["floor_front_right"][0]),
+        }
+    )
+    return np.array(across), np.array(along)
+
+
+@numba.njit(cache=True)
+def _square_to_quad(q: np.ndarray) -> np.ndarray:
+    """Homography (3, 3) mapping (0,0), (1,0), (0,1), (1,1) to q[0], q[1], q[2], q[3] (Heckbert)."""
+    x0, y0 = q[0, 0], q[0, 1]
+    x1, y1 = q[1, 0], q[1, 1]
+    x2, y2 = q[3, 0], q[3, 1]  # (1, 1)
+    x3, y3 = q[2, 0], q[2, 1]  # (0, 1)
+    sx = x0 - x1 + x2 - x3
+    sy = y0 - y1 + y2 - y3
+    h = np.zeros((3, 3))
+    if sx == 0.0 and sy == 0.0:
+        h[0, 0], h[0, 1], h[0, 2] = x1 - x0, x3 - x0, x0
+        h[1, 0], h[1, 1], h[1, 2] = y1 - y0, y3 - y0, y0
+        h[2, 2] = 1.0
+        return h
+    dx1, dx2 = x1 - x2, x3 - x2
+    dy1, dy2 = y1 - y2, y3 - y2
+    det = dx1 * dy2 - dx2 * dy1
+    if det == 0.0:
+        return h
+    g = (sx * dy2 - dx2 * sy) / det
+    hh = (dx1 * sy - sx * dy1) / det
+    h[0, 0], h[0, 1], h[0, 2] = x1 - x0 + g * x1, x3 - x0 + hh * x3, x0
+    h[1, 0], h[1, 1], h[1, 2] = y1 - y0 + g * y1, y3 - y0 + hh * y3, y0
+    h[2, 0], h[2, 1], h[2, 2] = g, hh, 1.0
+    return h
+
+
+@numba.njit(cache=True)
+def _intersect(l1: np.ndarray, l2: np.ndarray) -> tuple[float, float, bool]:
+    x = l1[1] * l2[2] - l1[2] * l2[1]
+    y = l1[2] * l2[0] - l1[0] * l2[2]
+    w = l1[0] * l2[1] - l1[1] * l2[0]
+    if abs(w) < 1e-12:
+        return 0.0, 0.0, False
+    return x / w, y / w, True
+
+
+@numba.njit(cache=True, inline="always")
+def _focal_of_floor_homography(
+    h: np.ndarray, focal_min: float, focal_max: float
+) -> float:
+    """Focal length (px) of a floor homography `h` (court floor (x, y, 1) -> image pixels relative
+    to the principal point) under square pixels, or -1 if it is not that of a rotation.
+
+    With K = diag(f, f, 1), K^-1 h = s [r1 r2 t]. Two conditions on r1, r2 are linear in
+    u = 1 / f^2: the floor axes are orthogonal (cos = e1 / (n1 n2)) and equally long
+    ((n1^2 - n2^2) / (n1^2 + n2^2) = e2 / N); with n1 ~ n2, n1 n2 ~ N / 2, so weights 2 and 1
+    make them comparable. Either may be degenerate on its own (the first when the court's
+    across lines are parallel in the image), not both for a camera looking down at the floor.
+    """
+    b1x, b1y, c1 = h[0, 0], h[1, 0], h[2, 0]
+    b2x, b2y, c2 = h[0, 1], h[1, 1], h[2, 1]
+    e1a = 2.0 * (b1x * b2x + b1y * b2y)
+    e1b = 2.0 * c1 * c2
+    e2a = b1x * b1x + b1y * b1y - b2x * b2x - b2y * b2y
+    e2b = c1 * c1 - c2 * c2
+    denom = e1a * e1a + e2a * e2a
+    if denom <= 0.0:
+        return -1.0
+    u = -(e1a * e1b + e2a * e2b) / denom
+    if u <= 0.0:
+        return -1.0
+    f = 1.0 / np.sqrt(u)
+    if f < focal_min or f > focal_max:
+        return -1.0
+    r1x, r1y, r1z = b1x / f, b1y / f, c1
+    r2x, r2y, r2z = b2x / f, b2y / f, c2
+    n1 = np.sqrt(r1x * r1x + r1y * r1y + r1z * r1z)
+    n2 = np.sqrt(r2x * r2x + r2y * r2y + r2z * r2z)
+    if n1 == 0.0 or n2 == 0.0:
+        return -1.0
+    if abs((r1x * r2x + r1y * r2y + r1z * r2z) / (n1 * n2)) > MAX_AXES_COS:
+        return -1.0
+    if abs(n1 / n2 - 1.0) > MAX_AXES_LENGTH_RATIO:
+        return -1.0
+    # how the camera is held (either sign of the homography's scale): r1, r2 are the court's x
+    # and y axes in camera coordinates, so the court's down axis is their cross product
+    ux, uy, uz = r1x / n1, r1y / n1, r1z / n1
+    vx, vy, vz = r2x / n2, r2y / n2, r2z / n2
+    dx = uy * vz - uz * vy
+    dy = uz * vx - ux * vz
+    dz = ux * vy - uy * vx
+    if not _upright(dx, dy, dz) and not _upright(-dx, -dy, -dz):
+        return -1.0
+    return f
+
+
+@numba.njit(cache=True, inline="always")
+def _upright(dx: float, dy: float, dz: float) -> bool:
+    """Whether a camera sees the world's down direction (dx, dy, dz) (camera coordinates, unit)
+    as people film: down in the picture within MAX_ROLL_RAD of the image's vertical, and the
+    optical axis between MAX_TILT_UP_RAD above and MAX_TILT_DOWN_RAD below the horizon."""
+    tilt_down = np.arcsin(min(max(dz, -1.0), 1.0))
+    if tilt_down < -MAX_TILT_UP_RAD or tilt_down > MAX_TILT_DOWN_RAD:
+        return False
+    # the image's down is +y; the world's down projected on the image plane is (dx, dy)
+    return dy > 0.0 and abs(np.arctan2(dx, dy)) <= MAX_ROLL_RAD
+
+
+@numba.njit(cache=True)
+def _pose_from_normalised(
+    m: np.ndarray,
+    height_min: float,
+    height_max: float,
+    max_distance: float,
+    court_centre: np.ndarray,
+    anchor: np.ndarray,
+    out_r: np.ndarray,
+    out_t: np.ndarray,
+) -> bool:
+    """Pose (R, t written to out_r, out_t) of a normalised floor homography m = K^-1 H (court floor
+    (x, y, 1) -> normalised camera coordinates, up to scale); False if the camera is not upright
+    or implausibly placed. `anchor` (2,) is a floor point that must be in front of the camera.
+
+    The nearest pair of orthonormal axes to m's first two columns (polar decomposition) is taken:
+    the mismatch of a homography from slightly misplaced lines is shared by both axes, not all
+    put on one. Q = M (M^T M)^(-1/2), with the square root of the 2 x 2 Gram matrix in closed form.
+    """
+    ax, ay, az = m[0, 0], m[1, 0], m[2, 0]
+    bx, by, bz = m[0, 1], m[1, 1], m[2, 1]
+    g11 = ax * ax + ay * ay + az * az
+    g12 = ax * bx + ay * by + az * bz
+    g22 = bx * bx + by * by + bz * bz
+    root_det = np.sqrt(max(g11 * g22 - g12 * g12, 1e-300))
+    norm = np.sqrt(g11 + g22 + 2.0 * root_det)
+    s11, s12, s22 = (g11 + root_det) / norm, g12 / norm, (g22 + root_det) / norm  # G^(1/2)
+    det_s = s11 * s22 - s12 * s12
+    i11, i12, i22 = s22 / det_s, -s12 / det_s, s11 / det_s  # G^(-1/2)
+    ux, uy, uz = ax * i11 + bx * i12, ay * i11 + by * i12, az * i11 + bz * i12
+    vx, vy, vz = ax * i12 + bx * i22, ay * i12 + by * i22, az * i12 + bz * i22
+    # the singular values of M are the eigenvalues of G^(1/2): their mean is half its trace
+    scale = 0.5 * (s11 + s22)
+    tx, ty, tz = m[0, 2] / scale, m[1, 2] / scale, m[2, 2] / scale
+    # the sign of the scale: the anchor must be in front of the camera
+    if uz * anchor[0] + vz * anchor[1] + tz < 0.0:
+        ux, uy, uz = -ux, -uy, -uz
+        vx, vy, vz = -vx, -vy, -vz
+        tx, ty, tz = -tx, -ty, -tz
+    wx = uy * vz - uz * vy
+    wy = uz * vx - ux * vz
+    wz = ux * vy - uy * vx
+    if not _upright(wx, wy, wz):
+        return False
+    # camera centre C = -R^T t (court frame, z down)
+    cx = -(ux * tx + uy * ty + uz * tz)
+    cy = -(vx * tx + vy * ty + vz * tz)
+    cz = -(wx * tx + wy * ty + wz * tz)
+    if not (height_min <= -cz <= height_max):
+        return False
+    if abs(cx - court_centre[0]) > max_distance or abs(cy - court_centre[1]) > max_distance:
+        return False
+    out_r[0, 0], out_r[1, 0], out_r[2, 0] = ux, uy, uz
+    out_r[0, 1], out_r[1, 1], out_r[2, 1] = vx, vy, vz
+    out_r[0, 2], out_r[1, 2], out_r[2, 2] = wx, wy, wz
+    out_t[0], out_t[1], out_t[2] = tx, ty, tz
+    return True
+
+
+@numba.njit(cache=True)
+def _pose_from_floor_homography(
+    h: np.ndarray,
+    focal_min: float,
+    focal_max: float,
+    height_min: float,
+    height_max: float,
+    max_distance: float,
+    court_centre: np.ndarray,
+    anchor: np.ndarray,
+    out_r: np.ndarray,
+    out_t: np.ndarray,
+) -> float:
+    """Camera of a floor homography `h` (pixels relative to the principal point, square pixels;
+    see `_focal_of_floor_homography`): its focal length (R, t written to out_r, out_t), or -1 if
+    the homography is not that of a rotation or the camera is implausible."""
+    f = _focal_of_floor_homography(h, focal_min, focal_max)
+    if f < 0.0:
+        return -1.0
+    m = h.copy()
+    m[0, :] /= f
+    m[1, :] /= f
+    if not _pose_from_normalised(
+        m, height_min, height_max, max_distance, court_centre, anchor, out_r, out_t
+    ):
+        return -1.0
+    return f
+
+
+@numba.njit(cache=True, inline="always")
+def _conic_row(p: np.ndarray, q: np.ndarray, row: np.ndarray, square: bool) -> None:
+    """Coefficients of p^T w q in the image-of-the-absolute-conic unknowns: w = [[a, 0, d],
+    [0, b, e], [d, e, g]] (zero skew); with `square`, a = b is one unknown (row: a, d, e, g),
+    else the principal point is the origin, d = e = 0 (row: a, b, g)."""
+    if square:
+        row[0] = p[0] * q[0] + p[1] * q[1]
+        row[1] = p[0] * q[2] + p[2] * q[0]
+        row[2] = p[1] * q[2] + p[2] * q[1]
+        row[3] = p[2] * q[2]
+    else:
+        row[0] = p[0] * q[0]
+        row[1] = p[1] * q[1]
+        row[2] = p[2] * q[2]
+
+
+@numba.njit(cache=True)
+def _intrinsics_with_vertical(
+    hu1: np.ndarray,
+    hu2: np.ndarray,
+    ratio2: float,
+    vertical: np.ndarray,
+    square: bool,
+    unit_px: float,
+    out: np.ndarray,
+) -> bool:
+    """Intrinsics (fx, fy, cx, cy relative to the image centre) written to `out` of the camera
+    whose floor's x and y directions image as `hu1` / dx and `hu2` / dy (a floor homography's
+    first two columns, pixels relative to the image centre; ratio2 = (dx / dy)^2) and whose
+    vertical images as `vertical`, when the principal point is unknown (`square`: square
+    pixels) or the pixels are not square (principal point at the centre). False if none.
+
+    The court's x, y and z axes are orthogonal and x, y equally long on the floor: with w the
+    image of the absolute conic, h1' w h2 = 0, h1' w h1 = h2' w h2, v' w h1 = 0, v' w h2 = 0:
+    four linear equations in w's unknowns (zero skew), solved in the least-squares sense
+    (smallest singular vector) and refused when they disagree. Pixels are measured in `unit_px`
+    (about a focal length) so w's entries are comparable, and each equation is weighted by the
+    size of its vectors, not by its own coefficients: an equation that nearly holds for every w
+    (x orthogonal to y for a camera looking straight down the court) stays small instead of
+    being blown up into a constraint.
+    """
+    n = 4 if square else 3
+    p1 = hu1.copy()
+    p2 = hu2.copy()
+    v = vertical.copy()
+    for vec in (p1, p2, v):
+        vec[0] /= unit_px
+        vec[1] /= unit_px
+    # one scale for h1 and h2 (their relative size is what equal length is about)
+    size = max(np.sqrt(np.sum(p1 * p1)), np.sqrt(np.sum(p2 * p2)))
+    p1 /= size
+    p2 /= size
+    v /= np.sqrt(np.sum(v * v))
+    a = np.zeros((4, n))
+    row = np.empty(n)
+    tmp = np.empty(n)
+    _conic_row(p1, p2, row, square)
+    a[0] = row
+    _conic_row(p1, p1, row, square)
+    _conic_row(p2, p2, tmp, square)
+    a[1] = (row - ratio2 * tmp) / (1.0 + ratio2)
+    _conic_row(v, p1, row, square)
+    a[2] = row
+    _conic_row(v, p2, row, square)
+    a[3] = row
+    _, sv, vt = np.linalg.svd(a)
+    w = vt[-1]
+    if sv[-1] > ALTERNATIVE_MAX_DISAGREEMENT * sv[0]:
+        return False  # the four conditions disagree: not a consistent camera
+    if w[0] < 0.0:
+        w = -w
+    if square:
+        # back from unit_px units: a / unit^2, d / unit, e / unit, g
+        wa, wd, we, wg = w[0] / unit_px**2, w[1] / unit_px, w[2] / unit_px, w[3]
+        if wa <= 0.0:
+            return False
+        lam = wg - (wd * wd + we * we) / wa
+        if lam <= 0.0:
+            return False
+        out[0] = out[1] = np.sqrt(lam / wa)
+        out[2] = -wd / wa
+        out[3] = -we / wa
+    else:
+        wa, wb, wg = w[0] / unit_px**2, w[1] / unit_px**2, w[2]
+        if wa <= 0.0 or wb <= 0.0 or wg <= 0.0:
+            return False
+        out[0] = np.sqrt(wg / wa)
+        out[1] = np.sqrt(wg / wb)
+        out[2] = 0.0
+        out[3] = 0.0
+    return True
+
+
+@numba.njit(cache=True)
+def _hypotheses_njit(
+    across_lines: np.ndarray,
+    along_lines: np.ndarray,
+    across_values: np.ndarray,
+    along_values: np.ndarray,
+    centre: np.ndarray,
+    width: float,
+    height: float,
+    focal_min: float,
+    focal_max: float,
+    min_area: float,
+    vertical: np.ndarray,
+    n_alt_lines: int,
+    ratios2: np.ndarray,
+    square_centred: bool,
+    out_h: np.ndarray,
+    out_k: np.ndarray,
+) -> int:
+    """Every quadruple of two `across_lines` and two `along_lines` (homogeneous, (n, 3)) under
+    every assignment of floor line values: floor homographies (court floor -> pixels relative
+    to the image centre) consistent with a camera held as people film are written to out_h with
+    their intrinsics (fx, fy, cx, cy relative to the centre) in out_k; returns the count.
+
+    Square pixels with the principal point at the centre are tried for every homography; when a
+    `vertical` vanishing point is given (homogeneous, relative to the centre; zeros for none),
+    also a free principal point (a cropped photo) and non-square pixels (an anamorphic frame),
+    kept when they differ from the first by more than ALTERNATIVE_MIN_OFFSET_SHARE of the width
+    or ALTERNATIVE_MIN_ASPECT_CHANGE.
+    """
+    n_a = across_lines.shape[0]
+    n_b = along_lines.shape[0]
+    n_out = 0
+    cap = out_h.shape[0]
+    limit = 3.0 * max(width, height)
+    quad = np.empty((4, 2))
+    hm = np.empty((3, 3))
+    k = np.empty(4)
+    alt_k = np.empty((2 * ratios2.shape[0], 4))
+    alt_ratio2 = np.empty(2 * ratios2.shape[0])
+    with_vertical = vertical[0] != 0.0 or vertical[1] != 0.0 or vertical[2] != 0.0
+    for i in range(n_a):
+        for j in range(i + 1, n_a):
+            for kk in range(n_b):
+                for l in range(kk + 1, n_b):
+                    ok = True
+                    for m, (la, lb) in enumerate(
+                        (
+                            (across_lines[i], along_lines[kk]),
+                            (across_lines[i], along_lines[l]),
+                            (across_lines[j], along_lines[kk]),
+                            (across_lines[j], along_lines[l]),
+                        )
+                    ):
+                        x, y, good = _intersect(la, lb)
+                        if not good or abs(x - centre[0]) > limit or abs(y - centre[1]) > limit:
+                            ok = False
+                            break
+                        quad[m, 0] = x - centre[0]
+                        quad[m, 1] = y - centre[1]
+                    if not ok:
+                        continue
+                    # quadrangle area (shoelace over corners 0, 1, 3, 2): tiny ones pin nothing
+                    area = 0.5 * abs(
+                        (quad[0, 0] * quad[1, 1] - quad[1, 0] * quad[0, 1])
+                        + (quad[1, 0] * quad[3, 1] - quad[3, 0] * quad[1, 1])
+                        + (quad[3, 0] * quad[2, 1] - quad[2, 0] * quad[3, 1])
+                        + (quad[2, 0] * quad[0, 1] - quad[0, 0] * quad[2, 1])
+                    )
+                    if area < min_area:
+                        continue
+                    # unit square (X' along the `along` pair kk->l, Y' across i->j) -> image
+                    hu = _square_to_quad(quad)
+                    if hu[2, 2] == 0.0:
+                        continue
+                    # intrinsics other than square pixels at the centre, from the vertical, for
+                    # the quadrangles of the strongest lines; they depend on the quadrangle and
+                    # the ratio of the assignment's x and y spans only
+                    n_alt = 0
+                    if with_vertical and i < n_alt_lines and j < n_alt_lines:
+                        if kk < n_alt_lines and l < n_alt_lines:
+                            for u in range(ratios2.shape[0]):
+                                for square in (True, False):
+                                    if not _intrinsics_with_vertical(
+                                        hu[:, 0].copy(), hu[:, 1].copy(), ratios2[u], vertical,
+                                        square, width, k,
+                                    ):
+                                        continue
+                                    if not (focal_min <= k[0] <= focal_max):
+                                        continue
+                                    if square:
+                                        shift = np.sqrt(k[2] * k[2] + k[3] * k[3])
+                                        if shift < ALTERNATIVE_MIN_OFFSET_SHARE * width:
+                                            continue
+                                        if abs(k[2]) > 0.5 * width or abs(k[3]) > 0.5 * height:
+                                            continue
+                                    else:
+                                        aspect = k[1] / k[0]
+                                        if abs(aspect - 1.0) < ALTERNATIVE_MIN_ASPECT_CHANGE or not (
+                                            ASPECT_RANGE[0] <= aspect <= ASPECT_RANGE[1]
+                                        ):
+                                            continue
+                                    alt_k[n_alt] = k
+                                    alt_ratio2[n_alt] = ratios2[u]
+                                    n_alt += 1
+                    for p in range(across_values.shape[0]):
+                        for q in range(across_values.shape[0]):
+                            if p == q:
+                                continue
+                            dy = across_values[q] - across_values[p]
+                            yp = across_values[p]
+                            for r in range(along_values.shape[0]):
+                                for s in range(along_values.shape[0]):
+                                    if r == s:
+                                        continue
+                                    dx = along_values[s] - along_values[r]
+                                    xr = along_values[r]
+                                    # H_model = H_unit A, A: (x, y) -> ((x - xr)/dx, (y - yp)/dy)
+                                    for row in range(3):
+                                        hm[row, 0] = hu[row, 0] / dx
+                                        hm[row, 1] = hu[row, 1] / dy
+                                        hm[row, 2] = hu[row, 2] - xr * hm[row, 0] - yp * hm[row, 1]
+                                    f = -1.0
+                                    if square_centred:
+                                        f = _focal_of_floor_homography(hm, focal_min, focal_max)
+                                    if f > 0.0:
+                                        if n_out >= cap:
+                                            return n_out
+                                        out_h[n_out] = hm
+                                        out_k[n_out, 0] = f
+                                        out_k[n_out, 1] = f
+                                        out_k[n_out, 2] = 0.0
+                                        out_k[n_out, 3] = 0.0
+                                        n_out += 1
+                                    for alt in range(n_alt):
+                                        if abs((dx * dx) / (dy * dy) / alt_ratio2[alt] - 1.0) > 1e-9:
+                                            continue
+                                        if n_out >= cap:
+                                            return n_out
+                                        out_h[n_out] = hm
+                                        out_k[n_out] = alt_k[alt]
+                                        n_out += 1
+    return n_out
+
+
+@numba.njit(cache=True)
+def _poses_njit(
+    homographies: np.ndarray,
+    intrinsics: np.ndarray,
+    height_min: float,
+    height_max: float,
+    max_distance: float,
+    court_centre: np.ndarray,
+    out_r: np.ndarray,
+    out_t: np.ndarray,
+) -> np.ndarray:
+    """Poses of floor homographies (N, 3, 3) (pixels relative to the image centre) under their
+    intrinsics (N, 4) (fx, fy, cx, cy relative to the centre); returns which are plausible."""
+    ok = np.zeros(homographies.shape[0], dtype=np.bool_)
+    m = np.empty((3, 3))
+    for i in range(homographies.shape[0]):
+        fx, fy, cx, cy = intrinsics[i, 0], intrinsics[i, 1], intrinsics[i, 2], intrinsics[i, 3]
+        h = homographies[i]
+        for c in range(3):
+            m[0, c] = (h[0, c] - cx * h[2, c]) / fx
+            m[1, c] = (h[1, c] - cy * h[2, c]) / fy
+            m[2, c] = h[2, c]
+        ok[i] = _pose_from_normalised(
+            m, height_min, height_max, max_distance, court_centre, court_centre, out_r[i], out_t[i]
+        )
+    return ok
+
+
+MAX_HYPOTHESES = 400_000
+DISTINCT_HOMOGRAPHY_SHARE = 0.008
+# Alternative intrinsics from a vertical vanishing point (see `_hypotheses_njit`): how far they
+# must differ from square pixels at the centre to be worth a hypothesis, and the aspect ratios
+# (f_v / f_u) a frame may have (anamorphic broadcast: 0.75).
+ALTERNATIVE_MIN_OFFSET_SHARE = 0.04
+ALTERNATIVE_MIN_ASPECT_CHANGE = 0.05
+ASPECT_RANGE = (0.65, 1.5)
+# They are tried on the quadrangles of this many strongest lines per group, and refused when the
+# four conditions disagree (smallest over largest singular value).
+ALTERNATIVE_LINES_PER_GROUP = 7
+ALTERNATIVE_MAX_DISAGREEMENT = 0.05
+
+
+def genomes_from_poses(
+    intrinsics: np.ndarray,
+    rotations: np.ndarray,
+    translations: np.ndarray,
+    image_size: tuple[int, int],
+    undistortion: Undistortion | None,
+) -> np.ndarray:
+    """Genomes (N, 15) of cameras with intrinsics (N, 4) (fx, fy, cx, cy relative to the image
+    centre; or (N,) focal lengths: square pixels at the centre), court-frame pose
+    (X_cam = R X + t), and the radial terms the division model amounts to."""
+    k = np.asarray(intrinsics, dtype=np.float64)
+    if k.ndim == 1:
+        k = np.column_stack([k, k, np.zeros_like(k), np.zeros_like(k)])
+    n = len(k)
+    width, height = image_size
+    genomes = np.zeros((n, camera.N_GENES))
+    genomes[:, 0], genomes[:, 1] = k[:, 0], k[:, 1]
+    genomes[:, 2] = (width - 1) / 2.0 + k[:, 2]
+    genomes[:, 3] = (height - 1) / 2.0 + k[:, 3]
+    genomes[:, 7:10] = camera.angles_from_rotations(rotations @ camera.PAPER_FROM_COURT_R.T)
+    genomes[:, 4:7] = translations + rotations @ camera.PAPER_ORIGIN_COURT_M
+    if undistortion is not None and undistortion.lam != 0.0:
+        # division model r_u = r_d / (1 + lam r_d^2) inverted to second order:
+        # r_d = r_u (1 + lam r_u^2 + 2 lam^2 r_u^4), radii in units of R; in focal units:
+        ratio2 = (k[:, 0] / undistortion.radius_px) ** 2
+        genomes[:, camera.GENE["k1"]] = undistortion.lam * ratio2
+        genomes[:, camera.GENE["k2"]] = 2.0 * undistortion.lam**2 * ratio2**2
+    return genomes
+
+
+def could_be_orthogonal(
+    vp_a: np.ndarray,
+    vp_b: np.ndarray,
+    centre: np.ndarray,
+    width: float,
+    max_cos: float = ORTHOGONAL_VP_MAX_COS,
+) -> bool:
+    """Whether two vanishing points (homogeneous) can be the images of two orthogonal directions
+    for a square-pixel camera whose principal point is near `centre`: (v_a - c).(v_b - c) =
+    -f^2 w_a w_b, so the vectors from c towards them must make an angle of at least ~90 degrees
+    (exactly 90 when one is at infinity), with a margin for a principal point off centre."""
+    def toward(vp: np.ndarray) -> tuple[np.ndarray, bool]:
+        if abs(vp[2]) < 1e-9 * np.linalg.norm(vp[:2]):
+            return vp[:2] / np.linalg.norm(vp[:2]), True
+        d = vp[:2] / vp[2] - centre
+        n = np.linalg.norm(d)
+        return (d / n if n > 0 else d), False
+
+    da, inf_a = toward(vp_a)
+    db, inf_b = toward(vp_b)
+    if inf_a and inf_b:
+        return True  # a camera looking straight down
+    cos = float(da @ db)
+    if inf_a or inf_b:
+        return abs(cos) <= max_cos
+    return cos <= max_cos
+
+
+def strongest(members: np.ndarray, strength: np.ndarray, count: int) -> np.ndarray:
+    """The `count` members with the greatest strength, strongest first."""
+    order = np.argsort(-strength[members], kind="stable")
+    return members[order[:count]]
+
+
+def floor_hypotheses(
+    lines: ImageLines,
+    groups: list[VanishingGroup],
+    model: CourtModel,
+    image_size: tuple[int, int],
+    undistortion: Undistortion | None,
+) -> np.ndarray:
+    """Plausible cameras (N, 15) from every pair of groups taken as (across, along) floor
+    lines (see the module doc); a third group that can be the vertical adds cameras with a free
+    principal point and with non-square pixels."""
+    width, height = image_size
+    across_values, along_values = floor_line_values(model)
+    homog = lines.homogeneous()
+    strength = lines.strength()
+    centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    to_centred = np.array([[1.0, 0.0, -centre[0]], [0.0, 1.0, -centre[1]], [0.0, 0.0, 1.0]])
+    court_centre = np.array([model.spec.width_m / 2.0, model.spec.length_m / 2.0])
+    out_h = np.empty((MAX_HYPOTHESES, 3, 3))
+    out_k = np.empty((MAX_HYPOTHESES, 4))
+    homographies, intrinsics = [], []
+    # every (dx / dy)^2 an assignment of floor lines can have
+    dxs = (along_values[:, None] - along_values[None, :])[~np.eye(len(along_values), dtype=bool)]
+    dys = (across_values[:, None] - across_values[None, :])[~np.eye(len(across_values), dtype=bool)]
+    ratios2 = np.unique((dxs[:, None] ** 2 / dys[None, :] ** 2).ravel())
+    for ga in groups:
+        for gb in groups:
+            if ga is gb:
+                continue
+            square_centred = could_be_orthogonal(ga.point, gb.point, centre, width)
+            # the best-supported other group that can be the vertical, if any
+            verticals = [
+                to_centred @ gz.point
+                for gz in groups
+                if gz is not ga and gz is not gb and could_be_vertical(gz.point, centre)
+            ][:1]
+            if not square_centred and not (
+                verticals
+                and could_be_orthogonal(ga.point, gb.point, centre, width, OFF_CENTRE_VP_MAX_COS)
+            ):
+                continue
+            a = homog[strongest(ga.lines, strength, QUADRUPLE_LINES_PER_GROUP)]
+            b = homog[strongest(gb.lines, strength, QUADRUPLE_LINES_PER_GROUP)]
+            if len(a) < 2 or len(b) < 2:
+                continue
+            for vertical in verticals or [np.zeros(3)]:
+                n = _hypotheses_njit(
+                    np.ascontiguousarray(a),
+                    np.ascontiguousarray(b),
+                    across_values,
+                    along_values,
+                    centre,
+                    float(width),
+                    float(height),
+                    FOCAL_RANGE_OF_WIDTH[0] * width,
+                    FOCAL_RANGE_OF_WIDTH[1] * width,
+                    MIN_QUAD_AREA_SHARE * width * height,
+                    np.ascontiguousarray(vertical / max(np.linalg.norm(vertical), 1e-300)),
+                    ALTERNATIVE_LINES_PER_GROUP,
+                    ratios2,
+                    square_centred,
+                    out_h,
+                    out_k,
+                )
+                homographies.append(out_h[:n].copy())
+                intrinsics.append(out_k[:n].copy())
+    if not homographies:
+        return np.zeros((0, camera.N_GENES))
+    all_h = np.concatenate(homographies)
+    all_k = np.concatenate(intrinsics)
+    keep = distinct_homographies(all_h, all_k, model, width)
+    all_h = np.ascontiguousarray(all_h[keep])
+    all_k = np.ascontiguousarray(all_k[keep])
+    n = len(all_h)
+    out_r = np.empty((n, 3, 3))
+    out_t = np.empty((n, 3))
+    ok = _poses_njit(
+        all_h,
+        all_k,
+        HEIGHT_RANGE_M[0],
+        HEIGHT_RANGE_M[1],
+        MAX_DISTANCE_FROM_COURT_M,
+        court_centre,
+        out_r,
+        out_t,
+    )
+    return genomes_from_poses(all_k[ok], out_r[ok], out_t[ok], image_size, undistortion)
+
+
+def distinct_homographies(
+    homographies: np.ndarray, intrinsics: np.ndarray, model: CourtModel, image_width: int
+) -> np.ndarray:
+    """Indices of homographies (N, 3, 3) with intrinsics (N, 4) that put the floor's corners and T
+    on different pixels (to DISTINCT_HOMOGRAPHY_SHARE of the image width) or have other
+    intrinsics: many line quadruples and assignments give the same camera, which need not be
+    scored twice (one floor homography with other intrinsics is another camera: other walls)."""
+    if len(homographies) == 0:
+        return np.zeros(0, np.int64)
+    names = ("floor_front_left", "floor_front_right", "floor_back_left", "floor_back_right", "T")
+    points = np.array([[*model.node(name)[:2], 1.0] for name in names])
+    mapped = np.einsum("nij,kj->nki", homographies, points)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pixels = mapped[..., :2] / mapped[..., 2:3]
+    cell = DISTINCT_HOMOGRAPHY_SHARE * image_width
+    cells = np.clip(np.round(pixels / cell), -(2**20), 2**20)
+    cells = np.where(np.isfinite(cells), cells, 2**20).astype(np.int64).reshape(len(homographies), -1)
+    aspect = np.round(20.0 * intrinsics[:, 1] / intrinsics[:, 0]).astype(np.int64)
+    shift = np.round(intrinsics[:, 2:4] / cell).astype(np.int64)
+    cells = np.column_stack([cells, aspect, shift])
+    # one 64-bit hash per row (a collision only drops a hypothesis)
+    key = np.zeros(len(cells), np.uint64)
+    for column in cells.T:
+        key = key * np.uint64(1_000_003) + column.astype(np.uint64)
+    _, first = np.unique(key, return_index=True)
+    return np.sort(first)
+
+
+def could_be_vertical(vp: np.ndarray, centre: np.ndarray) -> bool:
+    """Whether a vanishing point can be the world's vertical for a camera held level: straight
+    above or below the picture (within MAX_ROLL_RAD plus a margin for an off-centre principal
+    point), well outside it."""
+    if abs(vp[2]) < 1e-12 * np.linalg.norm(vp[:2]):
+        return False  # vertical lines parallel in the image: a level camera, no principal point
+    d = vp[:2] / vp[2] - centre
+    return abs(np.arctan2(d[0], abs(d[1]))) <= MAX_ROLL_RAD + np.deg2rad(10.0) and abs(d[1]) > centre[1]
+
+
+@dataclass(frozen=True)
+class VerifySamples:
+    """Court samples for verification: points (M, 3), unit directions of their edges (M, 3),
+    edge index (M,), painted (M,) bool, spacing (m)."""
+
+    points: np.ndarray
+    directions: np.ndarray
+    edge: np.ndarray
+    painted: np.ndarray
+    p_hit: np.ndarray  # (M,) edge_hit_probability of each sample's edge
+    spacing_m: float
+    n_edges: int
+
+
+def verify_samples(model: CourtModel, spacing_m: float = VERIFY_SPACING_M) -> VerifySamples:
+    samples = sample_edges(model, spacing_m)
+    counts = np.diff(samples.offsets)
+    edge = np.repeat(np.arange(len(model.edges)), counts)
+    vec = model.nodes[model.edges[:, 1]] - model.nodes[model.edges[:, 0]]
+    unit = vec / np.linalg.norm(vec, axis=1, keepdims=True)
+    return VerifySamples(
+        points=np.ascontiguousarray(samples.points),
+        directions=np.ascontiguousarray(unit[edge]),
+        edge=edge.astype(np.int64),
+        painted=model.painted()[edge],
+        p_hit=edge_hit_probability(model)[edge],
+        spacing_m=spacing_m,
+        n_edges=len(model.edges),
+    )
+
+
+@dataclass(frozen=True)
+class ChanceMaps:
+    """How likely a line placed at random would find evidence running its way, per place.
+
+    values (B, h, w) float32 on a grid `scale` times coarser than the image: for normal
+    directions in bin b (of B over [0, pi)), the chance that a point is within `tolerance_px`
+    of evidence with such a normal: the local density of that evidence (box filter over
+    CHANCE_WINDOW_SHARE of the width) times the width of the tolerance band.
+    """
+
+    values: np.ndarray
+    scale: int
+    tolerance_px: float
+
+
+CHANCE_BINS = 6
+CHANCE_WINDOW_SHARE = 0.12
+CHANCE_MIN = 0.02
+CHANCE_MAX = 0.95
+
+
+def chance_maps(maps: EvidenceMaps, tolerance_px: float) -> ChanceMaps:
+    h, w = maps.shape
+    scale = 2
+    angle = np.arctan2(maps.normals[:, 1], maps.normals[:, 0]) % np.pi
+    bins = np.minimum((angle * (CHANCE_BINS / np.pi)).astype(np.int64), CHANCE_BINS - 1)
+    xs = np.clip(np.rint(maps.points[:, 0]).astype(np.int64), 0, w - 1) // scale
+    ys = np.clip(np.rint(maps.points[:, 1]).astype(np.int64), 0, h - 1) // scale
+    hs, ws = (h + scale - 1) // scale, (w + scale - 1) // scale
+    counts = np.zeros((CHANCE_BINS, hs, ws), np.float32)
+    np.add.at(counts, (bins, ys, xs), 1.0)
+    window = max(3, int(round(CHANCE_WINDOW_SHARE * w / scale)) | 1)
+    values = np.empty_like(counts)
+    # evidence pixels per image pixel (a coarse cell holds scale^2 pixels), times the band width
+    band = (2.0 * tolerance_px + 1.0) / float(scale * scale)
+    for b in range(CHANCE_BINS):
+        values[b] = cv2.boxFilter(counts[b], -1, (window, window)) * band
+    np.clip(values, CHANCE_MIN, CHANCE_MAX, out=values)
+    return ChanceMaps(values, scale, float(tolerance_px))
+
+
+@numba.njit(cache=True)
+def _verify_njit(
+    pop: np.ndarray,
+    points: np.ndarray,
+    directions: np.ndarray,
+    edge: np.ndarray,
+    painted: np.ndarray,
+    p_hits: np.ndarray,
+    n_edges: int,
+    step_m: float,
+    spacing_m: float,
+    fold_tan2: np.ndarray,
+    dist_ridge: np.ndarray,
+    near_ridge: np.ndarray,
+    dist_any: np.ndarray,
+    near_any: np.ndarray,
+    normals: np.ndarray,
+    ignore: np.ndarray,
+    tolerance: float,
+    max_sin: float,
+    chance: np.ndarray,
+    chance_scale: int,
+    supported: np.ndarray,
+    visible: np.ndarray,
+    llr: np.ndarray,
+) -> None:
+    """Per camera and court edge: supported and visible projected length (px); per camera the
+    log-likelihood ratio of the evidence under "the court is here" against chance."""
+    h, w = ignore.shape
+    max_sample_px = MAX_SAMPLE_SHARE_OF_DIAGONAL * np.sqrt(h * h + w * w)
+    n_bins = chance.shape[0]
+    r = np.empty((3, 3))
+    t = np.empty(3)
+    inv_tol2 = 1.0 / (tolerance * tolerance)
+    for i in range(pop.shape[0]):
+        g = pop[i]
+        extrinsics_njit(g, r, t)
+        for e in range(n_edges):
+            supported[i, e] = 0.0
+            visible[i, e] = 0.0
+        total = 0.0
+        for j in range(points.shape[0]):
+            x, y, z = points[j, 0], points[j, 1], points[j, 2]
+            u, v, depth = project_point_njit(r, t, g, x, y, z)
+            if depth <= 0.05:
+                continue
+            # beyond the lens fold the polynomial maps points back into the picture as ghosts
+            xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
+            yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
+            if (xc * xc + yc * yc) > fold_tan2[i] * depth * depth:
+                continue
+            if not (0.0 <= u <= w - 1.0 and 0.0 <= v <= h - 1.0):
+                continue
+            iu = int(u + 0.5)
+            iv = int(v + 0.5)
+            if ignore[iv, iu]:
+                continue
+            u2, v2, depth2 = project_point_njit(
+                r,
+                t,
+                g,
+                x + step_m * directions[j, 0],
+                y + step_m * directions[j, 1],
+                z + step_m * directions[j, 2],
+            )
+            du = u2 - u
+            dv = v2 - v
+            step_px = np.sqrt(du * du + dv * dv)
+            if depth2 <= 0.05 or step_px == 0.0:
+                continue
+            # one lookup stands for this much line: a camera with a line grazing its lens must
+            # not win on a few lookups that stand for thousands of pixels
+            length_px = min(step_px * (spacing_m / step_m), max_sample_px)
+            e = edge[j]
+            visible[i, e] += length_px
+            p_hit = p_hits[j]
+            if painted[j]:
+                d = dist_ridge[iv, iu]
+                k = near_ridge[iv, iu]
+            else:
+                d = dist_any[iv, iu]
+                k = near_any[iv, iu]
+            support = 0.0
+            # the evidence must run the same way: its normal across the model line's direction
+            if (
+                k >= 0
+                and d <= tolerance
+                and abs(normals[k, 0] * du + normals[k, 1] * dv) <= max_sin * step_px
+            ):
+                support = 1.0 - d * d * inv_tol2
+                supported[i, e] += length_px * support
+            # chance of support here for a line with this normal (bins interpolated)
+            angle = np.arctan2(du, -dv)
+            if angle < 0.0:
+                angle += np.pi
+            pos = angle * n_bins / np.pi - 0.5
+            b0 = int(np.floor(pos))
+            frac = pos - b0
+            b1 = (b0 + 1) % n_bins
+            b0 = b0 % n_bins
+            cu = min(iu // chance_scale, chance.shape[2] - 1)
+            cv = min(iv // chance_scale, chance.shape[1] - 1)
+            c = (1.0 - frac) * chance[b0, cv, cu] + frac * chance[b1, cv, cu]
+            weight = length_px / tolerance
+            total += weight * (
+                support * np.log(p_hit / c) + (1.0 - support) * np.log((1.0 - p_hit) / (1.0 - c))
+            )
+        llr[i] = total
+
+
+def edge_support(
+    genomes: np.ndarray,
+    samples: VerifySamples,
+    maps: EvidenceMaps,
+    tolerance_px: float,
+    max_angle_rad: float = VERIFY_MAX_ANGLE_RAD,
+    chance: ChanceMaps | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Supported and visible projected length (px) per camera and court edge, (N, E) each, and
+    each camera's log-likelihood ratio (N,) against chance (see `_verify_njit`)."""
+    pop = np.ascontiguousarray(camera.as_population(genomes))
+    supported = np.empty((len(pop), samples.n_edges))
+    visible = np.empty((len(pop), samples.n_edges))
+    llr = np.empty(len(pop))
+    fold = camera.lens_fold_radii(pop)
+    if chance is None or chance.tolerance_px != tolerance_px:
+        chance = chance_maps(maps, tolerance_px)
+    _verify_njit(
+        pop,
+        samples.points,
+        samples.directions,
+        samples.edge,
+        samples.painted,
+        samples.p_hit,
+        samples.n_edges,
+        0.02,
+        samples.spacing_m,
+        np.where(np.isfinite(fold), fold**2, 1e12),
+        maps.dist_ridge,
+        maps.near_ridge,
+        maps.dist_any,
+        maps.near_any,
+        maps.normals,
+        maps.ignore.view(np.uint8),
+        float(tolerance_px),
+        float(np.sin(max_angle_rad)),
+        chance.values,
+        chance.scale,
+        supported,
+        visible,
+        llr,
+    )
+    return supported, visible, llr
+
+
+COARSE_SPACING_M = 0.6
+FLOOR_PASS_SPACING_M = 0.8
+
+
+@numba.njit(cache=True)
+def _coarse_njit(
+    pop: np.ndarray,
+    points: np.ndarray,
+    same_edge_as_previous: np.ndarray,
+    p_hits: np.ndarray,
+    painted: np.ndarray,
+    dist_ridge: np.ndarray,
+    near_ridge: np.ndarray,
+    dist_any: np.ndarray,
+    near_any: np.ndarray,
+    normals: np.ndarray,
+    ignore: np.ndarray,
+    tolerance: float,
+    max_sin: float,
+    chance: np.ndarray,
+    chance_scale: int,
+    out: np.ndarray,
+) -> None:
+    """A cheap first ranking: the log-likelihood ratio of `_verify_njit` over a sparse sampling,
+    each sample's line direction and length taken from the previous sample of its edge (one
+    projection per sample instead of two)."""
+    h, w = ignore.shape
+    n_bins = chance.shape[0]
+    max_sample_px = 2.0 * MAX_SAMPLE_SHARE_OF_DIAGONAL * np.sqrt(h * h + w * w)
+    r = np.empty((3, 3))
+    t = np.empty(3)
+    inv_tol2 = 1.0 / (tolerance * tolerance)
+    for i in range(pop.shape[0]):
+        g = pop[i]
+        extrinsics_njit(g, r, t)
+        total = 0.0
+        pu = 0.0
+        pv = 0.0
+        previous_ok = False
+        for j in range(points.shape[0]):
+            u, v, depth = project_point_njit(r, t, g, points[j, 0], points[j, 1], points[j, 2])
+            ok = depth > 0.05 and 0.0 <= u <= w - 1.0 and 0.0 <= v <= h - 1.0
+            if ok and previous_ok and same_edge_as_previous[j]:
+                du = u - pu
+                dv = v - pv
+                step = np.sqrt(du * du + dv * dv)
+                iu = int(u + 0.5)
+                iv = int(v + 0.5)
+                if step > 0.0 and not ignore[iv, iu]:
+                    length = min(step, max_sample_px)
+                    if painted[j]:
+                        d = dist_ridge[iv, iu]
+                        k = near_ridge[iv, iu]
+                    else:
+                        d = dist_any[iv, iu]
+                        k = near_any[iv, iu]
+                    support = 0.0
+                    if (
+                        k >= 0
+                        and d <= tolerance
+                        and abs(normals[k, 0] * du + normals[k, 1] * dv) <= max_sin * step
+                    ):
+                        support = 1.0 - d * d * inv_tol2
+                    angle = np.arctan2(du, -dv)
+                    if angle < 0.0:
+                        angle += np.pi
+                    pos = angle * n_bins / np.pi - 0.5
+                    b0 = int(np.floor(pos))
+                    frac = pos - b0
+                    b1 = (b0 + 1) % n_bins
+                    b0 = b0 % n_bins
+                    cu = min(iu // chance_scale, chance.shape[2] - 1)
+                    cv = min(iv // chance_scale, chance.shape[1] - 1)
+                    c = (1.0 - frac) * chance[b0, cv, cu] + frac * chance[b1, cv, cu]
+                    p = p_hits[j]
+                    total += (length / tolerance) * (
+                        support * np.log(p / c) + (1.0 - support) * np.log((1.0 - p) / (1.0 - c))
+                    )
+            previous_ok = ok
+            pu = u
+            pv = v
+        out[i] = total
+
+
+def coarse_scores(
+    genomes: np.ndarray,
+    model: CourtModel,
+    maps: EvidenceMaps,
+    tolerance_px: float,
+    floor_only: bool = False,
+) -> np.ndarray:
+    """`_coarse_njit` over a sparse sampling of the court (N,), or of its floor only (sparser:
+    a first cut through hundreds of thousands of hypotheses)."""
+    if floor_only:
+        floor_edges = [
+            name
+            for name, (a, b) in zip(model.edge_names, model.edges, strict=True)
+            if model.nodes[a][2] == 0.0 and model.nodes[b][2] == 0.0
+        ]
+        samples = verify_samples(model.subset(floor_edges), FLOOR_PASS_SPACING_M)
+    else:
+        samples = verify_samples(model, COARSE_SPACING_M)
+    same = np.concatenate([[False], samples.edge[1:] == samples.edge[:-1]])
+    chance = chance_maps(maps, tolerance_px)
+    out = np.empty(len(genomes))
+    _coarse_njit(
+        np.ascontiguousarray(camera.as_population(genomes)),
+        samples.points,
+        same,
+        samples.p_hit,
+        samples.painted,
+        maps.dist_ridge,
+        maps.near_ridge,
+        maps.dist_any,
+        maps.near_any,
+        maps.normals,
+        maps.ignore.view(np.uint8),
+        float(tolerance_px),
+        float(np.sin(VERIFY_MAX_ANGLE_RAD)),
+        chance.values,
+        chance.scale,
+        out,
+    )
+    return out
+
+
+def reference_pixels(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
+    """Pixels (N, 6, 2) of six floor points (corners, T, half_back): to tell cameras apart."""
+    names = ("floor_front_left", "floor_front_right", "floor_back_left", "floor_back_right", "T")
+    pts = np.array([model.node(n) for n in names] + [model.node("half_back")])
+    pixels, depth = camera.project_points(camera.as_population(genomes), pts)
+    pixels = np.where(depth[..., None] > 0, pixels, 1e6)
+    return pixels
+
+
+def distinct_best(
+    genomes: np.ndarray, scores: np.ndarray, model: CourtModel, image_size: tuple[int, int], k: int
+) -> np.ndarray:
+    """Indices of up to k best-scoring cameras, each differing from the better ones (a floor
+    reference point moved by more than DISTINCT_SHARE_OF_WIDTH of the width)."""
+    order = np.argsort(-scores, kind="stable")
+    chosen: list[int] = []
+    if len(order) == 0:
+        return np.zeros(0, np.int64)
+    pixels = reference_pixels(genomes[order[: 50 * k]], model)
+    limit = DISTINCT_SHARE_OF_WIDTH * image_size[0]
+    kept_pixels: list[np.ndarray] = []
+    for rank, idx in enumerate(order[: 50 * k]):
+        p = pixels[rank]
+        clipped = np.clip(p, -2 * image_size[0], 3 * image_size[0])
+        if any(np.max(np.linalg.norm(clipped - q, axis=1)) < limit for q in kept_pixels):
+            continue
+        chosen.append(int(idx))
+        kept_pixels.append(clipped)
+        if len(chosen) == k:
+            break
+    return np.array(chosen, dtype=np.int64)
+
+
+def verify_tolerance_px(image_width: int) -> float:
+    return max(2.5, VERIFY_TOLERANCE_PX_AT_1920 * image_width / 1920.0)
+
+
+def rank_tolerance_px(image_width: int) -> float:
+    return max(5.0, RANK_TOLERANCE_PX_AT_1920 * image_width / 1920.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# typical placements: one more source of hypotheses (and the default start of the paper's GA)
+
+
+def look_at_genomes(
+    centres_m: np.ndarray,
+    targets_m: np.ndarray,
+    roll_rad: np.ndarray,
+    focal_px: np.ndarray,
+    image_size: tuple[int, int],
+) -> np.ndarray:
+    """Genomes (N, 15) of pinhole cameras at court points `centres_m` (N, 3) looking at
+    `targets_m` (N, 3), rolled by `roll_rad` (N,), principal point at the image centre."""
+    forward = targets_m - centres_m
+    forward /= np.linalg.norm(forward, axis=1, keepdims=True)
+    down = np.array([0.0, 0.0, 1.0])  # court z points down, as the image's v does
+    right = np.cross(down, forward)
+    right /= np.linalg.norm(right, axis=1, keepdims=True)
+    up_in_image = np.cross(forward, right)  # the camera's y axis (image down)
+    cos_r, sin_r = np.cos(roll_rad)[:, None], np.sin(roll_rad)[:, None]
+    x_axis = cos_r * right + sin_r * up_in_image
+    y_axis = -sin_r * right + cos_r * up_in_image
+    rotations = np.stack([x_axis, y_axis, forward], axis=1)
+    width, height = image_size
+    genomes = np.zeros((len(centres_m), camera.N_GENES))
+    genomes[:, 0] = genomes[:, 1] = focal_px
+    genomes[:, 2], genomes[:, 3] = (width - 1) / 2.0, (height - 1) / 2.0
+    # the genome's pose is in the paper frame: the inverse of camera.court_extrinsics
+    r_paper = rotations @ camera.PAPER_FROM_COURT_R.T
+    genomes[:, 7:10] = [camera.angles_from_rotation(r) for r in r_paper]
+    t_court = -np.einsum("nij,nj->ni", rotations, centres_m)
+    genomes[:, 4:7] = t_court + rotations @ camera.PAPER_ORIGIN_COURT_M
+    return genomes
+
+
+def _focal_to_fit(
+    centres_m: np.ndarray, targets_m: np.ndarray, nodes_m: np.ndarray, image_size: tuple[int, int]
+) -> np.ndarray:
+    """Focal length (N,) at which the farthest of `nodes_m` (in front of each unrolled camera) just
+    touches the image border, the principal point being the image centre."""
+    width, height = image_size
+    n = len(centres_m)
+    unit = look_at_genomes(centres_m, targets_m, np.zeros(n), np.ones(n), (1, 1))
+    unit[:, 2:4] = 0.0
+    pixels, depth = camera.project_points(unit, nodes_m)
+    in_front = depth > 0.1
+    span_u = np.maximum(np.where(in_front, np.abs(pixels[..., 0]), 0.0).max(axis=1), 1e-3)
+    span_v = np.maximum(np.where(in_front, np.abs(pixels[..., 1]), 0.0).max(axis=1), 1e-3)
+    return np.minimum(0.5 * width / span_u, 0.5 * height / span_v)
+
+
+@dataclass(frozen=True)
+class StartGrid:
+    """Typical squash camera placements: behind (or on) the back wall, centred or a bit off,
+    from a low tripod to a high gallery; aimed along the court; court filling the frame more or
+    less. All in the court frame (metres; z down, so heights are negative z)."""
+
+    behind_back_wall_m: tuple[float, ...] = (0.3, 2.0, 4.5, 8.0, 13.0)
+    height_m: tuple[float, ...] = (1.5, 2.5, 3.7, 5.2, 7.0)
+    camera_x_m: tuple[float, ...] = (2.0, 3.2, 4.4)
+    aim_x_m: tuple[float, ...] = (2.2, 3.2, 4.2)
+    aim_y_m: tuple[float, ...] = (1.0, 3.0, 5.0)
+    roll_deg: tuple[float, ...] = (-4.0, 0.0, 4.0)
+    fill: tuple[float, ...] = (0.7, 0.85, 1.0, 1.2, 1.45)
+
+
+@functools.lru_cache(maxsize=16)
+def _default_grid_starts(image_size: tuple[int, int], spec: str) -> np.ndarray:
+    starts = _candidate_starts(image_size, court_model(spec), StartGrid())
+    starts.setflags(write=False)
+    return starts
+
+
+def candidate_starts(
+    image_size: tuple[int, int], model: CourtModel, grid: StartGrid | None = None
+) -> np.ndarray:
+    """Start cameras (N, 15) over the grid's placements (the default grid is cached per image
+    size and court spec: it is the same for every image)."""
+    if grid is None and COURT_SPECS.get(model.spec.name) == model.spec:
+        return _default_grid_starts((int(image_size[0]), int(image_size[1])), model.spec.name)
+    return _candidate_starts(image_size, model, grid or StartGrid())
+
+
+def _candidate_starts(
+    image_size: tuple[int, int], model: CourtModel, grid: StartGrid | None = None
+) -> np.ndarray:
+    """Start cameras (N, 15) over the grid's placements, focal set by the fill factor."""
+    grid = grid or StartGrid()
+    length = model.spec.length_m
+    mesh = np.meshgrid(
+        grid.behind_back_wall_m,
+        grid.height_m,
+        grid.camera_x_m,
+        grid.aim_x_m,
+        grid.aim_y_m,
+        indexing="ij",
+    )
+    behind, height, cam_x, aim_x, aim_y = (m.ravel() for m in mesh)
+    scale_x = model.spec.width_m / 6.4  # the grid is written for a 6.4 m singles court
+    centres = np.column_stack([cam_x * scale_x, length + behind, -height])
+    targets = np.column_stack([aim_x * scale_x, aim_y, np.zeros_like(aim_y)])
+    # Scale by the front part of the court (front wall to the service boxes): a camera on the back
+    # wall does not see the back wall's own corners, however wide its lens.
+    front_part = model.nodes[model.nodes[:, 1] <= 0.75 * length]
+    focal = _focal_to_fit(centres, targets, front_part, image_size)
+    # every placement with every roll and fill factor
+    n_pose, n_roll, n_fill = len(centres), len(grid.roll_deg), len(grid.fill)
+    pose = np.repeat(np.arange(n_pose), n_roll * n_fill)
+    roll = np.tile(np.repeat(np.deg2rad(grid.roll_deg), n_fill), n_pose)
+    fill = np.tile(np.asarray(grid.fill, dtype=np.float64), n_pose * n_roll)
+    return look_at_genomes(centres[pose], targets[pose], roll, focal[pose] * fill, image_size)
+
+
+def default_start_genome(image_size: tuple[int, int], spec: str = "wsf") -> np.ndarray:
+    """One typical camera: centred 2 m behind the back wall, 3.7 m up, whole court in view."""
+    model = court_model(spec)
+    grid = StartGrid(
+        behind_back_wall_m=(2.0,),
+        height_m=(3.7,),
+        camera_x_m=(3.2,),
+        aim_x_m=(3.2,),
+        aim_y_m=(3.0,),
+        roll_deg=(0.0,),
+        fill=(0.9,),
+    )
+    return candidate_starts(image_size, model, grid)[0]
+
+
+# ---------------------------------------------------------------------------------------------
+# how much of the picture the court's floor fills: users film the floor (that is where the
+# players' feet are), so a camera that shows almost none of it is not the answer
+
+MIN_FLOOR_SHARE = 0.05
+_FLOOR_EDGE_PIECES = 8
+_NEAR_DEPTH_M = 0.1
+
+
+@numba.njit(cache=True)
+def _clip_polygon(poly: np.ndarray, n: int, axis: int, limit: float, keep_above: bool, out: np.ndarray) -> int:
+    """Sutherland-Hodgman: the part of polygon poly[:n] with coordinate `axis` >= limit (or <=)."""
+    m = 0
+    for i in range(n):
+        a = poly[i]
+        b = poly[(i + 1) % n]
+        a_in = a[axis] >= limit if keep_above else a[axis] <= limit
+        b_in = b[axis] >= limit if keep_above else b[axis] <= limit
+        if a_in:
+            out[m] = a
+            m += 1
+        if a_in != b_in:
+            s = (limit - a[axis]) / (b[axis] - a[axis])
+            out[m] = a + s * (b - a)
+            m += 1
+    return m
+
+
+@numba.njit(cache=True)
+def _floor_share_njit(
+    pop: np.ndarray,
+    outline: np.ndarray,
+    fold_radius: np.ndarray,
+    width: float,
+    height: float,
+    out: np.ndarray,
+) -> None:
+    n0 = outline.shape[0]
+    cam = np.empty((2 * n0 + 4, 3))
+    clipped = np.empty((2 * n0 + 4, 3))
+    px = np.empty((2 * n0 + 20, 2))
+    tmp = np.empty((2 * n0 + 20, 2))
+    tmp2 = np.empty((2 * n0 + 20, 2))
+    r = np.empty((3, 3))
+    t = np.empty(3)
+    for i in range(pop.shape[0]):
+        g = pop[i]
+        extrinsics_njit(g, r, t)
+        for k in range(n0):
+            for a in range(3):
+                cam[k, a] = (
+                    r[a, 0] * outline[k, 0] + r[a, 1] * outline[k, 1] + r[a, 2] * outline[k, 2] + t[a]
+                )
+        n = _clip_polygon(cam, n0, 2, _NEAR_DEPTH_M, True, clipped)
+        if n < 3:
+            out[i] = 0.0
+            continue
+        # on the undistorted normalised plane, keep what the lens maps faithfully: inside its
+        # fold, and not far beyond the picture (the polynomial means nothing out there)
+        bound = 3.0 * max(width, height) / min(g[0], g[1])
+        if np.isfinite(fold_radius[i]):
+            bound = min(bound, 0.95 * fold_radius[i] / np.sqrt(2.0))
+        for k in range(n):
+            tmp[k, 0] = clipped[k, 0] / clipped[k, 2]
+            tmp[k, 1] = clipped[k, 1] / clipped[k, 2]
+        n = _clip_polygon(tmp, n, 0, -bound, True, tmp2)
+        n = _clip_polygon(tmp2, n, 0, bound, False, tmp)
+        n = _clip_polygon(tmp, n, 1, -bound, True, tmp2)
+        n = _clip_polygon(tmp2, n, 1, bound, False, px)
+        for k in range(n):
+            xn = px[k, 0]
+            yn = px[k, 1]
+            r2 = xn * xn + yn * yn
+            radial = 1.0 + g[10] * r2 + g[11] * r2 * r2 + g[14] * r2 * r2 * r2
+            a1 = 2.0 * xn * yn
+            xd = xn * radial + g[12] * a1 + g[13] * (r2 + 2.0 * xn * xn)
+            yd = yn * radial + g[12] * (r2 + 2.0 * yn * yn) + g[13] * a1
+            tmp[k, 0] = min(max(g[0] * xd + g[2], -10.0 * width), 11.0 * width)
+            tmp[k, 1] = min(max(g[1] * yd + g[3], -10.0 * height), 11.0 * height)
+        m = _clip_polygon(tmp, n, 0, 0.0, True, tmp2)
+        m = _clip_polygon(tmp2, m, 0, width, False, tmp)
+        m = _clip_polygon(tmp, m, 1, 0.0, True, tmp2)
+        m = _clip_polygon(tmp2, m, 1, height, False, tmp)
+        area = 0.0
+        for k in range(m):
+            j = (k + 1) % m
+            area += tmp[k, 0] * tmp[j, 1] - tmp[j, 0] * tmp[k, 1]
+        out[i] = abs(0.5 * area) / (width * height)
+
+
+def floor_outline(model: CourtModel) -> np.ndarray:
+    """The floor's boundary (4 * _FLOOR_EDGE_PIECES, 3), corners and points between them, so a
+    distorting lens bends its edges."""
+    width, length = model.spec.width_m, model.spec.length_m
+    corners = np.array([[0.0, 0.0, 0.0], [width, 0.0, 0.0], [width, length, 0.0], [0.0, length, 0.0]])
+    s = np.linspace(0.0, 1.0, _FLOOR_EDGE_PIECES, endpoint=False)[:, None]
+    return np.concatenate([a + s * (b - a) for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True)])
+
+
+def floor_shares(genomes: np.ndarray, model: CourtModel, image_size: tuple[int, int]) -> np.ndarray:
+    """Share of the picture the court's floor fills, per camera (N,)."""
+    pop = np.ascontiguousarray(camera.as_population(genomes))
+    out = np.empty(len(pop))
+    _floor_share_njit(
+        pop,
+        floor_outline(model),
+        camera.lens_fold_radii(pop),
+        float(image_size[0]),
+        float(image_size[1]),
+        out,
+    )
+    return out

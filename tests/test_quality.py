@@ -1,0 +1,103 @@
+"""The verdict (quality.py): figures of a camera on the line evidence, and the rules that turn
+them into good / check / not_a_court."""
+
+import numpy as np
+import pytest
+
+from app.calib import camera, lines, quality, scene, search
+from app.calib.court import court_model
+
+SIZE = (1280, 720)
+
+
+def _camera() -> np.ndarray:
+    return search.look_at_genomes(
+        np.array([[3.2, 11.0, -3.0]]),
+        np.array([[3.2, 4.0, 0.0]]),
+        np.zeros(1),
+        np.array([600.0]),
+        SIZE,
+    )[0]
+
+
+@pytest.fixture(scope="module")
+def maps() -> lines.EvidenceMaps:
+    photo = scene.render_court_image(_camera(), SIZE, rng=5)
+    return lines.evidence_maps(lines.line_evidence(photo))
+
+
+def _figures(genome: np.ndarray, maps: lines.EvidenceMaps) -> dict[str, float]:
+    model = court_model()
+    figures = quality.quality_figures(genome, search.verify_samples(model), maps, model, SIZE[0])
+    figures["floor_error_t_cm"] = 1.0
+    figures["floor_share"] = float(search.floor_shares(genome, model, SIZE)[0])
+    return figures
+
+
+def test_the_true_camera_is_good(maps):
+    figures = _figures(_camera(), maps)
+    assert figures["supported_edges"] >= 15
+    assert figures["wall_edges_supported"] >= 3
+    assert figures["support_excess"] > 0.6
+    judged = quality.verdict(figures)
+    assert judged.label == "good", judged.reasons
+    assert 0.5 < judged.score <= 1.0
+
+
+@pytest.mark.parametrize(("gene", "offset"), [("t_x", 0.4), ("t_z", 1.0), ("gamma", 0.05)])
+def test_a_camera_half_a_metre_off_is_not_a_court(maps, gene, offset):
+    moved = _camera().copy()
+    moved[camera.GENE[gene]] += offset
+    figures = _figures(moved, maps)
+    judged = quality.verdict(figures)
+    assert judged.label == "not_a_court" and judged.reasons
+    assert figures["supported_edges"] < _figures(_camera(), maps)["supported_edges"] - 5
+
+
+def _typical_right() -> dict[str, float]:
+    """Figures of a right camera on a club view (median-like values from bench.synthetic)."""
+    return {
+        "supported_edges": 20.0,
+        "edges_in_view": 26.0,
+        "supported_share_of_edges": 0.77,
+        "wall_edges_supported": 7.0,
+        "floor_across_supported": 7.0,
+        "floor_along_supported": 7.0,
+        "support_fraction": 0.8,
+        "chance_fraction": 0.1,
+        "support_excess": 0.7,
+        "absent_fraction": 0.1,
+        "floor_error_t_cm": 0.5,
+        "floor_share": 0.3,
+    }
+
+
+def test_typical_right_figures_are_good():
+    assert quality.verdict(_typical_right()).label == "good"
+
+
+@pytest.mark.parametrize(
+    ("change", "words"),
+    [
+        ({"wall_edges_supported": 0.0}, "another sport"),
+        ({"floor_along_supported": 1.0}, "do not pin the floor down"),
+        ({"floor_across_supported": 2.0}, "do not pin the floor down"),
+        ({"supported_edges": 9.0}, "only 9 court lines"),
+        ({"supported_share_of_edges": 0.4}, "only 40% of the court lines"),
+        ({"support_excess": 0.2, "support_fraction": 0.3}, "by chance"),
+        ({"floor_error_t_cm": 80.0}, "do not pin the camera down"),
+        ({"floor_share": 0.01}, "film the floor"),
+        ({"absent_fraction": 0.7}, "has no line there"),
+    ],
+)
+def test_each_rule_refuses_with_its_reason(change, words):
+    figures = {**_typical_right(), **change}
+    judged = quality.verdict(figures)
+    assert judged.label == "not_a_court"
+    assert any(words in reason for reason in judged.reasons), judged.reasons
+
+
+def test_doubtful_figures_ask_for_a_check():
+    judged = quality.verdict({**_typical_right(), "absent_fraction": 0.45})
+    assert judged.label == "check"
+    assert any("not seen" in reason for reason in judged.reasons)

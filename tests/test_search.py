@@ -1,0 +1,196 @@
+"""The global search (segments.py, search.py): lines, vanishing groups, hypotheses, verification."""
+
+import numpy as np
+import pytest
+
+from app.calib import camera, court, lines, scene, search, segments, synthetic
+from app.calib.court import floor_grid
+
+SIZE = (960, 540)
+
+
+def _image_lines(genome: np.ndarray, names: list[str]) -> segments.ImageLines:
+    """The exact image lines of some court edges (pinhole cameras only), as the search gets them."""
+    model = court.court_model()
+    normals, offsets, extents = [], [], []
+    for name in names:
+        a, b = model.nodes[model.edges[model.edge_names.index(name)]]
+        p, q = camera.project_visible(genome, np.array([a, b]))
+        d = (q - p) / np.linalg.norm(q - p)
+        n = np.array([-d[1], d[0]])
+        normals.append(n)
+        offsets.append(float(n @ p))
+        extents.append([p, q])
+    count = len(names)
+    return segments.ImageLines(
+        normal=np.array(normals),
+        offset=np.array(offsets),
+        extent=np.array(extents),
+        support_px=np.linspace(200.0, 100.0, count),
+        contrast=np.full(count, 20.0),
+        ridge_share=np.ones(count),
+        members=tuple((i,) for i in range(count)),
+    )
+
+
+def _floor_error_px(
+    truth: np.ndarray, genomes: np.ndarray, walls_too: bool = False
+) -> np.ndarray:
+    """Median pixel error of the floor grid (or of the court's nodes, walls included)."""
+    grid = court.court_model().nodes if walls_too else floor_grid()
+    true_px = camera.project_visible(truth, grid)
+    seen = np.all(np.isfinite(true_px), axis=1)
+    est_px, _ = camera.project_points(camera.as_population(genomes), grid[seen])
+    return np.median(np.linalg.norm(est_px - true_px[seen][None], axis=2), axis=1)
+
+
+FLOOR_LINES = ["short_left_inner", "box_left_back", "left_floor_box", "half_court", "box_left_side"]
+WALL_CORNERS = ["front_left_corner_high", "front_right_corner_high"]
+
+
+def _pinhole_target() -> np.ndarray:
+    genome = synthetic.typical_target_camera(SIZE)
+    genome[camera.DISTORTION_GENES] = 0.0
+    return genome
+
+
+def test_floor_hypotheses_contain_the_camera_that_made_the_lines():
+    truth = _pinhole_target()
+    image_lines = _image_lines(truth, FLOOR_LINES)
+    groups = search.vanishing_groups(image_lines)
+    assert len(groups) >= 2
+    hypotheses = search.floor_hypotheses(image_lines, groups, court.court_model(), SIZE, None)
+    assert len(hypotheses) > 0
+    assert _floor_error_px(truth, hypotheses).min() < 0.1
+    # every hypothesis is a camera held as people film: level, looking down at the court
+    r, _ = camera.court_extrinsics(hypotheses)
+    down_in_camera = r[:, :, 2]
+    assert np.all(down_in_camera[:, 1] > 0)
+
+
+def test_a_cropped_photo_is_found_with_the_vertical():
+    truth = _pinhole_target()
+    truth[camera.GENE["c_u"]] += 0.3 * SIZE[0]  # the principal point far right of the centre
+    truth[camera.GENE["c_v"]] -= 0.1 * SIZE[1]
+    floor_only = _image_lines(truth, FLOOR_LINES)
+    model = court.court_model()
+    without = search.floor_hypotheses(floor_only, search.vanishing_groups(floor_only), model, SIZE, None)
+    with_walls = _image_lines(truth, FLOOR_LINES + WALL_CORNERS)
+    groups = search.vanishing_groups(with_walls)
+    found = search.floor_hypotheses(with_walls, groups, model, SIZE, None)
+    # square pixels at the centre cannot explain the floor; with the walls' vertical they can
+    assert len(without) == 0 or _floor_error_px(truth, without).min() > 2.0
+    best = int(np.argmin(_floor_error_px(truth, found)))
+    assert _floor_error_px(truth, found)[best] < 1.0
+    assert found[best, camera.GENE["c_u"]] == pytest.approx(truth[camera.GENE["c_u"]], abs=5.0)
+
+
+def test_an_anamorphic_frame_is_found_with_the_vertical():
+    truth = _pinhole_target()
+    truth[camera.GENE["f_v"]] = 0.75 * truth[camera.GENE["f_u"]]  # 1440 columns shown as 1920
+    truth[camera.GENE["alpha"]] += 0.1  # looking down more: the across lines stay parallel
+    image_lines = _image_lines(truth, FLOOR_LINES + WALL_CORNERS)
+    groups = search.vanishing_groups(image_lines)
+    found = search.floor_hypotheses(image_lines, groups, court.court_model(), SIZE, None)
+    # the floor and one vertical direction fit square pixels with a principal point off centre
+    # just as well (it is the verification on every line, the service line's height among them,
+    # that tells them apart); the frame's own camera must be among the hypotheses
+    errors = _floor_error_px(truth, found, walls_too=True)
+    anamorphic = np.abs(found[:, 1] / found[:, 0] - 0.75) < 0.02
+    assert anamorphic.any()
+    assert errors[anamorphic].min() < 0.5
+
+
+def test_could_be_orthogonal_and_vertical():
+    centre = np.array([639.5, 359.5])
+    horizontal_at_infinity = np.array([1.0, 0.0, 0.0])
+    above = np.array([640.0, -900.0, 1.0])
+    below = np.array([650.0, 5000.0, 1.0])
+    beside = np.array([5000.0, 340.0, 1.0])
+    assert search.could_be_orthogonal(horizontal_at_infinity, above, centre, 1280)
+    assert not search.could_be_orthogonal(horizontal_at_infinity, beside, centre, 1280)
+    assert search.could_be_orthogonal(above, below, centre, 1280)
+    assert search.could_be_vertical(below, centre)
+    assert not search.could_be_vertical(beside, centre)
+    assert not search.could_be_vertical(np.array([0.0, 1.0, 0.0]), centre)
+
+
+@pytest.fixture(scope="module")
+def rendered() -> tuple[np.ndarray, np.ndarray, lines.EvidenceMaps]:
+    truth = synthetic.typical_target_camera(SIZE)
+    image = scene.render_court_image(truth, SIZE, rng=3)
+    return truth, image, lines.evidence_maps(lines.line_evidence(image))
+
+
+def test_the_true_camera_outscores_moved_ones(rendered):
+    truth, _, maps = rendered
+    model = court.court_model()
+    samples = search.verify_samples(model)
+    moved = np.repeat(truth[None], 4, axis=0)
+    moved[0, camera.GENE["t_x"]] += 0.15
+    moved[1, camera.GENE["alpha"]] += 0.01
+    moved[2, camera.GENE["f_u"] : camera.GENE["f_v"] + 1] *= 1.05
+    moved[3, camera.GENE["t_z"]] += 1.0
+    cameras = np.vstack([truth[None], moved])
+    tolerance = search.verify_tolerance_px(SIZE[0])
+    supported, visible, llr = search.edge_support(cameras, samples, maps, tolerance)
+    assert np.argmax(llr) == 0
+    assert supported[0].sum() / visible[0].sum() > 0.7
+    coarse = search.coarse_scores(cameras, model, maps, search.rank_tolerance_px(SIZE[0]))
+    assert np.argmax(coarse) == 0
+
+
+def test_a_line_grazing_the_lens_does_not_win_on_a_few_samples(rendered):
+    truth, _, maps = rendered
+    samples = search.verify_samples(court.court_model())
+    tolerance = search.verify_tolerance_px(SIZE[0])
+    _, visible, _ = search.edge_support(truth, samples, maps, tolerance)
+    # no sample stands for more than a share of the diagonal: an edge's visible length is bounded
+    per_sample_cap = search.MAX_SAMPLE_SHARE_OF_DIAGONAL * np.hypot(*SIZE)
+    counts = np.bincount(samples.edge, minlength=samples.n_edges)
+    assert np.all(visible[0] <= counts * per_sample_cap + 1e-6)
+
+
+def test_floor_share(rendered):
+    truth, _, _ = rendered
+    model = court.court_model()
+    share = search.floor_shares(truth, model, SIZE)[0]
+    # the floor polygon drawn and counted
+    floor = np.zeros(SIZE[::-1], np.uint8)
+    corners = camera.floor_to_pixel(truth, np.array([[0, 0], [6.4, 0], [6.4, 9.75], [0, 9.75]]))
+    import cv2
+
+    cv2.fillPoly(floor, [np.round(corners).astype(np.int32)], 1)
+    assert share == pytest.approx(floor.mean(), abs=0.03)
+    looking_up = truth.copy()
+    looking_up[camera.GENE["alpha"]] -= 0.6
+    assert search.floor_shares(looking_up, model, SIZE)[0] < share / 3
+
+
+def test_distinct_best_keeps_cameras_apart(rendered):
+    truth, _, _ = rendered
+    model = court.court_model()
+    near = np.repeat(truth[None], 3, axis=0)
+    near[1, camera.GENE["t_x"]] += 0.001
+    near[2, camera.GENE["t_x"]] += 1.0
+    chosen = search.distinct_best(near, np.array([3.0, 2.0, 1.0]), model, SIZE, 3)
+    assert list(chosen) == [0, 2]
+
+
+def test_chains_segments_and_the_lens(rendered):
+    truth, image, _ = rendered
+    evidence = lines.line_evidence(image)
+    chains = segments.chains_of(evidence)
+    assert len(chains) > 10
+    lens = segments.estimate_undistortion(chains, SIZE)
+    # the typical target's barrel lens (k1 -0.12 at f = 1000 px): lambda = k1 (R / f)^2 < 0
+    assert -0.2 < lens.lam < -0.03
+    pieces = segments.segments_of(chains, lens, 20.0)
+    image_lines = segments.merge_collinear(pieces)
+    assert len(image_lines) < len(pieces)
+    # the half-court line is one long line through its projection
+    model = court.court_model()
+    a, b = model.nodes[model.edges[model.edge_names.index("half_court")]]
+    ends = lens.apply(camera.project_visible(truth, np.array([a, b])))
+    distance = np.abs(ends @ image_lines.normal.T - image_lines.offset[None, :]).max(axis=0)
+    assert distance.min() < 1.5
