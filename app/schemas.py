@@ -81,15 +81,42 @@ class OpenCVCamera(BaseModel):
     image_size: list[int]
 
 
+class Verdict(BaseModel):
+    """Whether a person can trust the camera: "good", or "check" (look at the overlay first)."""
+
+    model_config = ConfigDict(extra="allow")
+    label: str = Field(examples=["good", "check"])
+    score: float | None = None
+    reasons: list[str] = Field(default_factory=list)
+    figures: dict[str, Any] = Field(default_factory=dict)
+
+
+class CameraPose(BaseModel):
+    """Where the camera is and where it looks, in the court frame."""
+
+    position_m: list[float] = Field(description="camera centre (x, y, z), z down (above floor < 0)")
+    height_m: float = Field(description="height above the floor, positive metres")
+    pan_deg: float = Field(description="0 = looking straight at the front wall; + = to the right")
+    tilt_deg: float = Field(description="degrees below the horizontal")
+    roll_deg: float = Field(
+        description="rotation about the viewing direction; + = picture's right side lower"
+    )
+    fov_deg: list[float] = Field(description="field of view across and down the image")
+
+
 class CalibrationOut(BaseModel):
     id: str
     court_id: str
-    job_id: str
+    job_id: str | None = Field(description="the job that made it; null for an imported camera")
+    source: Literal["upload", "import"]
     spec: str
     opencv: OpenCVCamera
     genome: list[float]
-    fitness: float
+    fitness: float | None = Field(description="the GA fitness; null for an imported camera")
     quality: dict[str, Any]
+    verdict: Verdict | None = None
+    uncertainty: dict[str, Any] | None = None
+    pose: CameraPose
     seed: int | None
     bundle: str | None
     generations: int | None
@@ -97,6 +124,68 @@ class CalibrationOut(BaseModel):
     active: bool
     background_url: str
     overlay_url: str
+    timings_s: dict[str, float] = Field(default_factory=dict, description="seconds per stage")
+
+
+class JobList(BaseModel):
+    jobs: list[JobOut]
+
+
+class ActivateCamera(StrictModel):
+    calibration_id: str = Field(
+        description="a calibration of this court; it becomes the active one"
+    )
+
+
+class CameraImport(StrictModel):
+    camera: dict[str, Any] = Field(
+        description='the OpenCV JSON form {"K", "dist", "rvec", "tvec", "image_size"} (court frame)'
+    )
+    activate: bool = Field(default=True, description="make it the court's active camera")
+
+
+class PixelsRequest(StrictModel):
+    pixels: list[FinitePair] = Field(
+        max_length=100_000, description="image points [u, v] in pixels (OpenCV convention)"
+    )
+
+
+class TopdownRequest(PixelsRequest):
+    mode: Literal["auto", "points", "heatmap"] = "auto"
+
+
+class FloorPlan(BaseModel):
+    outline: list[list[list[float]]] = Field(description="wall/floor junctions: [[x, y], [x, y]] m")
+    painted: list[list[list[float]]] = Field(description="painted floor lines: [[x, y], [x, y]] m")
+
+
+class CourtLines(BaseModel):
+    """The court drawn as data, for a page that draws it itself."""
+
+    calibration_id: str
+    image_size: list[int]
+    court_m: list[float] = Field(description="court width and length in metres")
+    fitted: list[list[list[float]]] = Field(
+        description="the fitted camera's court: pixel polylines"
+    )
+    start: list[list[list[float]]] | None = Field(description="the start camera's court, if any")
+    floor: FloorPlan
+
+
+class Me(BaseModel):
+    tenant_id: str
+    tenant_name: str
+    key_name: str
+
+
+class PageConfig(BaseModel):
+    """What the browser page needs to know before it talks to the API."""
+
+    specs: list[dict[str, Any]]
+    max_upload_bytes: int
+    max_files: int
+    image_types: list[str]
+    video_types: list[str]
 
 
 class CalibrationList(BaseModel):

@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 from sqlalchemy import Engine
 
-from app.calib.background import background_from_frames
+from app.calib.background import ClipError, background_from_clip, background_from_frames
 from app.db import media, queue
 from app.db.models import Calibration, new_id
 from app.db.session import make_engine
@@ -186,6 +186,7 @@ def process_job(
 ) -> str:
     """Run one claimed job to its end. Returns the job's new status (or "released"/"lost")."""
     from app.calib import pipeline
+    from app.viewer.pictures import line_evidence
 
     heartbeat = Heartbeat(engine, job, worker_id, settings, shutdown)
     heartbeat.start()
@@ -195,10 +196,10 @@ def process_job(
     try:
         heartbeat.report("background", 0.0)
         t0 = time.perf_counter()
-        frames = load_frames(settings, job.id, job.media_kind, job.media_files)
-        heartbeat.check()
-        background, moving_mask = background_from_frames(frames)
+        background, moving_mask, background_info = _background(settings, job)
         timings["background"] = time.perf_counter() - t0
+        for stage, seconds in background_info.get("timings_s", {}).items():
+            timings[f"background.{stage}"] = float(seconds)
         heartbeat.report("background", 1.0)
 
         kwargs: dict[str, Any] = {"seed": int(job.params.get("seed") or 0), "spec": job.spec}
@@ -211,9 +212,10 @@ def process_job(
         if settings.ga_time_budget_s is not None:
             kwargs["time_budget_s"] = settings.ga_time_budget_s
         t0 = time.perf_counter()
+        moving_or_none = moving_mask if np.any(moving_mask) else None
         result = pipeline.calibrate(
             background,
-            moving_mask=moving_mask if np.any(moving_mask) else None,
+            moving_mask=moving_or_none,
             progress=heartbeat.pipeline_progress,
             **kwargs,
         )
@@ -230,9 +232,12 @@ def process_job(
         _write_png(
             cal_dir / "overlay.png", pipeline.draw_overlay(background, result.genome, job.spec)
         )
+        # the line evidence the fit used (players masked out), for GET .../edges.png
+        _write_png(cal_dir / "edges.png", line_evidence(background, moving_or_none))
         media.fsync_tree(cal_dir)
         heartbeat.check()
         result_json = result.to_json()
+        result_json["background"] = background_info
         timings["storing"] = time.perf_counter() - t0
         timings["total"] = time.perf_counter() - t_start
         calibration = Calibration(
@@ -275,6 +280,33 @@ def process_job(
         heartbeat.stop()
         if cal_dir is not None:  # not committed: leave no orphaned images behind
             shutil.rmtree(cal_dir, ignore_errors=True)
+
+
+def _background(
+    settings: Settings, job: queue.ClaimedJob
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """The upload's player-free background, its moving mask, and what it was made from.
+
+    A clip: from its longest static view (`background_from_clip`); the info records the shots
+    and the time ranges used.
+    """
+    if job.media_kind == "video":
+        path = media.job_dir(settings, job.id) / job.media_files[0]
+        if not path.is_file():
+            raise MediaError(
+                "media_missing", f"the uploaded file is missing from storage: {path.name}"
+            )
+        try:
+            return background_from_clip(
+                path,
+                n_frames=settings.background_frames,
+                max_duration_s=settings.max_video_duration_s,
+            )
+        except ClipError as exc:
+            raise MediaError(exc.code, str(exc)) from exc
+    frames = load_frames(settings, job.id, job.media_kind, job.media_files)
+    background, moving_mask = background_from_frames(frames)
+    return background, moving_mask, {"frames_used": len(frames)}
 
 
 def _rounded(timings: dict[str, float]) -> dict[str, float]:

@@ -132,15 +132,3 @@ def get_background(
 ) -> FileResponse:
     """The player-free background the camera was fitted to."""
     return _calibration_image(calibration_id, "background.png", state, session, tenant_id)
-
-
-@router.get(
-    "/calibrations/{calibration_id}/overlay.png",
-    response_class=FileResponse,
-    responses={200: {"content": {"image/png": {}}}},
-)
-def get_overlay(
-    calibration_id: str, state: StateDep, session: SessionDep, tenant_id: TenantDep
-) -> FileResponse:
-    """The background with the fitted court drawn over it."""
-    return _calibration_image(calibration_id, "overlay.png", state, session, tenant_id)

@@ -51,26 +51,57 @@ def _as_array(pairs: list[tuple[float, float]]) -> np.ndarray:
     return np.asarray(pairs, dtype=np.float64).reshape(-1, 2)
 
 
-@router.post("/project", response_model=ProjectResponse)
-def project(body: ProjectRequest, state: StateDep, tenant_id: TenantDep) -> Response:
-    """Image pixels -> floor (x, y) metres in the court frame; null where the ray misses."""
-    entry = state.cameras.get(tenant_id, body.court_id)
-    genome = _calibrated(entry)
-    floor_xy, status = camera.pixel_to_floor(genome, _as_array(body.pixels))
+def floor_points_response(
+    genome: np.ndarray,
+    pixels: list[tuple[float, float]],
+    court_size_m: tuple[float, float],
+    calibration_id: str | None,
+) -> Response:
+    """The ProjectResponse of `pixels` through `genome` (also used per calibration)."""
+    width_m, length_m = court_size_m
+    floor_xy, status = camera.pixel_to_floor(genome, _as_array(pixels))
     ok = status == camera.RAY_OK
     inside = (
         ok
         & (floor_xy[:, 0] >= 0.0)
-        & (floor_xy[:, 0] <= entry.court_width_m)
+        & (floor_xy[:, 0] <= width_m)
         & (floor_xy[:, 1] >= 0.0)
-        & (floor_xy[:, 1] <= entry.court_length_m)
+        & (floor_xy[:, 1] <= length_m)
     )
     return _json(
         {
             "points": _pairs_or_null(floor_xy, FLOOR_DECIMALS),
             "inside_court": inside.tolist(),
-            "calibration_id": entry.calibration_id,
+            "calibration_id": calibration_id,
         }
+    )
+
+
+def image_points_response(
+    genome: np.ndarray,
+    points: list[tuple[float, float]],
+    image_size: tuple[int, int],
+    calibration_id: str | None,
+) -> Response:
+    """The ImagePointsResponse of floor `points` through `genome` (also used per calibration)."""
+    pixels = camera.floor_to_pixel(genome, _as_array(points))
+    in_image = camera.pixels_in_image(pixels, image_size)
+    return _json(
+        {
+            "pixels": _pairs_or_null(pixels, PIXEL_DECIMALS),
+            "in_image": in_image.tolist(),
+            "calibration_id": calibration_id,
+        }
+    )
+
+
+@router.post("/project", response_model=ProjectResponse)
+def project(body: ProjectRequest, state: StateDep, tenant_id: TenantDep) -> Response:
+    """Image pixels -> floor (x, y) metres in the court frame; null where the ray misses."""
+    entry = state.cameras.get(tenant_id, body.court_id)
+    genome = _calibrated(entry)
+    return floor_points_response(
+        genome, body.pixels, (entry.court_width_m, entry.court_length_m), entry.calibration_id
     )
 
 
@@ -81,22 +112,5 @@ def image_points(
     """Floor (x, y) metres -> image pixels; null where the point is behind the camera."""
     entry = state.cameras.get(tenant_id, court_id)
     genome = _calibrated(entry)
-    pixels = camera.floor_to_pixel(genome, _as_array(body.points))
     assert entry.image_size is not None
-    width, height = entry.image_size
-    with np.errstate(invalid="ignore"):
-        # pixel centres at integers: the image spans -0.5 .. size - 0.5
-        in_image = (
-            np.isfinite(pixels).all(axis=1)
-            & (pixels[:, 0] >= -0.5)
-            & (pixels[:, 0] <= width - 0.5)
-            & (pixels[:, 1] >= -0.5)
-            & (pixels[:, 1] <= height - 0.5)
-        )
-    return _json(
-        {
-            "pixels": _pairs_or_null(pixels, PIXEL_DECIMALS),
-            "in_image": in_image.tolist(),
-            "calibration_id": entry.calibration_id,
-        }
-    )
+    return image_points_response(genome, body.points, entry.image_size, entry.calibration_id)

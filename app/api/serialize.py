@@ -2,8 +2,19 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from app.db.models import Calibration, Court, Job
-from app.schemas import CalibrationOut, CourtOut, JobError, JobOut, OpenCVCamera
+from app.schemas import (
+    CalibrationOut,
+    CameraPose,
+    CourtOut,
+    JobError,
+    JobOut,
+    OpenCVCamera,
+    Verdict,
+)
+from app.viewer.camera_text import camera_pose
 
 
 def court_out(court: Court) -> CourtOut:
@@ -43,15 +54,24 @@ def job_out(job: Job) -> JobOut:
 
 def calibration_out(cal: Calibration, active: bool) -> CalibrationOut:
     result = cal.result or {}
+    verdict = result.get("verdict")
+    pose = camera_pose(np.asarray(cal.genome), (cal.image_width, cal.image_height))
     return CalibrationOut(
         id=cal.id,
         court_id=cal.court_id,
         job_id=cal.job_id,
+        source="upload" if cal.job_id is not None else "import",
         spec=cal.spec,
         opencv=OpenCVCamera(**cal.opencv),
         genome=list(cal.genome),
         fitness=cal.fitness,
         quality=cal.quality,
+        verdict=Verdict.model_validate(verdict) if isinstance(verdict, dict) else None,
+        uncertainty=result.get("uncertainty")
+        if isinstance(result.get("uncertainty"), dict)
+        else None,
+        pose=CameraPose(**pose),
+        timings_s={k: float(v) for k, v in (result.get("timings_s") or {}).items()},
         seed=result.get("seed"),
         bundle=result.get("bundle"),
         generations=result.get("generations"),

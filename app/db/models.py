@@ -139,11 +139,14 @@ class Calibration(Base):
     id: Mapped[str] = mapped_column(String(32), primary_key=True, default=new_id)
     tenant_id: Mapped[str] = mapped_column(ForeignKey("tenants.id", ondelete="CASCADE"), index=True)
     court_id: Mapped[str] = mapped_column(ForeignKey("courts.id", ondelete="CASCADE"), index=True)
-    job_id: Mapped[str] = mapped_column(ForeignKey("jobs.id", ondelete="CASCADE"), unique=True)
+    # None for an imported camera (no job made it, and it has no fitness)
+    job_id: Mapped[str | None] = mapped_column(
+        ForeignKey("jobs.id", ondelete="CASCADE"), unique=True
+    )
     spec: Mapped[str] = mapped_column(String(32))
     genome: Mapped[list[float]] = mapped_column(JSON)
     opencv: Mapped[dict[str, Any]] = mapped_column(JSON)
-    fitness: Mapped[float] = mapped_column(Float)
+    fitness: Mapped[float | None] = mapped_column(Float)
     quality: Mapped[dict[str, Any]] = mapped_column(JSON)
     # the pipeline's whole CalibrationResult.to_json(): seed, bundle, generations, timings, ...
     result: Mapped[dict[str, Any]] = mapped_column(JSON)

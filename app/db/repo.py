@@ -140,3 +140,20 @@ def new_job(
     session.add(job)
     session.flush()
     return job
+
+
+def list_jobs(session: Session, tenant_id: str, court_id: str, limit: int) -> Sequence[Job]:
+    """The court's most recent jobs, newest first."""
+    court = get_owned(session, Court, tenant_id, court_id)
+    return session.scalars(
+        select(Job)
+        .where(Job.court_id == court.id, Job.tenant_id == tenant_id)
+        .order_by(Job.created_at.desc(), Job.id)
+        .limit(limit)
+    ).all()
+
+
+def api_key_for_hash(session: Session, key_sha256: str) -> ApiKey | None:
+    return session.scalar(
+        select(ApiKey).where(ApiKey.key_sha256 == key_sha256, ApiKey.revoked_at.is_(None))
+    )

@@ -7,7 +7,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from app.calib import synthetic
+from app.calib import scene
 
 
 def png_bytes(width: int = 64, height: int = 48, seed: int = 0) -> bytes:
@@ -31,7 +31,7 @@ def video_bytes(
 ) -> bytes:
     frames = [np.full((height, width, 3), 10 * i % 250, np.uint8) for i in range(n_frames)]
     path = tmp_path / f"clip_{width}x{height}_{n_frames}.mp4"
-    synthetic.write_video(frames, path, fps=fps)
+    scene.write_video(frames, path, fps=fps)
     return path.read_bytes()
 
 
@@ -43,9 +43,9 @@ def court_clip_bytes(
     seed: int,
     n_players: int = 2,
 ) -> bytes:
-    frames = synthetic.render_clip_frames(genome, image_size, n_frames, seed, n_players=n_players)
+    frames = scene.render_clip_frames(genome, image_size, n_frames, seed, n_players=n_players)
     path = tmp_path / f"court_{seed}.mp4"
-    synthetic.write_video(frames, path)
+    scene.write_video(frames, path)
     return path.read_bytes()
 
 

@@ -6,6 +6,7 @@ import httpx
 import pytest
 
 from app.db import repo
+from app.db.migrate import head_revision
 from app.db.session import make_engine, make_sessionmaker
 from app.main import create_app
 from app.settings import Settings
@@ -28,12 +29,12 @@ def make_court(client: httpx.Client, auth: dict[str, str], name: str = "Court 1"
     return str(response.json()["id"])
 
 
-def test_health_and_ready(client: httpx.Client) -> None:
+def test_health_and_ready(client: httpx.Client, settings: Settings) -> None:
     assert client.get("/healthz").json() == {"status": "ok"}
     ready = client.get("/readyz")
     assert ready.status_code == 200
     assert ready.json()["status"] == "ready"
-    assert ready.json()["revision"] == "0001"
+    assert ready.json()["revision"] == head_revision(settings)
 
 
 def test_ready_fails_before_migrations(tmp_path) -> None:

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from app.calib import background, synthetic
+from app.calib import background, scene, synthetic
 from worker import media as worker_media
 
 SIZE = (480, 270)
@@ -17,8 +17,8 @@ SIZE = (480, 270)
 @pytest.fixture(scope="module")
 def clip() -> tuple[list[np.ndarray], np.ndarray]:
     genome = synthetic.typical_target_camera(SIZE)
-    frames = synthetic.render_clip_frames(genome, SIZE, 9, 11, n_players=2)
-    truth = synthetic.render_court_image(genome, SIZE, rng=11)
+    frames = scene.render_clip_frames(genome, SIZE, 9, 11, n_players=2)
+    truth = scene.render_court_image(genome, SIZE, rng=11)
     return frames, truth
 
 
@@ -81,7 +81,7 @@ def _numbered_clip(tmp_path: Path, n_frames: int) -> Path:
     """Frame i is a flat grey of brightness i (so a decoded frame tells which one it is)."""
     frames = [np.full((48, 64, 3), i, np.uint8) for i in range(n_frames)]
     path = tmp_path / "numbered.mp4"
-    synthetic.write_video(frames, path)
+    scene.write_video(frames, path)
     return path
 
 

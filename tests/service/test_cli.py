@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from app.db import repo
+from app.db.migrate import head_revision
 from app.db.session import make_engine, make_sessionmaker
 from tests.service.conftest import make_settings
 
@@ -30,7 +31,7 @@ def test_migrate_and_manage_keys(tmp_path: Path) -> None:
     data_dir = tmp_path / "data"
     migrated = squashcal(data_dir, "migrate")
     assert migrated.returncode == 0, migrated.stderr
-    assert "revision 0001" in migrated.stdout
+    assert f"revision {head_revision(make_settings(data_dir))}" in migrated.stdout
 
     created = squashcal(data_dir, "keys", "create", "--name", "coach app")
     assert created.returncode == 0, created.stderr

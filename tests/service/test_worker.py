@@ -10,13 +10,16 @@ import cv2
 import httpx
 import numpy as np
 import pytest
+from sqlalchemy import select
 
-from app.calib import camera, synthetic
+from app.calib import camera, scene, synthetic
 from app.db import media, queue
 from app.db.migrate import upgrade_head
-from app.db.session import make_engine
+from app.db.models import Calibration
+from app.db.session import make_engine, make_sessionmaker
 from app.main import create_app
 from app.settings import Settings
+from tests import clips
 from tests.service.conftest import api_client, make_settings, new_key
 from tests.service.helpers import court_clip_bytes, files
 from tests.service.test_api import assert_error, make_court
@@ -49,7 +52,7 @@ def worker_settings(tmp_path: Path) -> Settings:
 
 
 def png_frames(genome: np.ndarray, n: int, seed: int) -> list[bytes]:
-    frames = synthetic.render_clip_frames(genome, SIZE, n, seed, n_players=2)
+    frames = scene.render_clip_frames(genome, SIZE, n, seed, n_players=2)
     return [cv2.imencode(".png", f)[1].tobytes() for f in frames]
 
 
@@ -207,3 +210,73 @@ def test_upload_to_projection_on_postgres(tmp_path: Path) -> None:
             ).json()
             error_cm = 100 * np.linalg.norm(np.array(body["points"]) - MID_COURT_M, axis=1)
             assert error_cm.max() < 5.0, error_cm
+
+
+def _stored_result(settings: Settings, calibration_id: str) -> dict:
+    """The calibration's result JSON as the worker stored it (the API does not show all of it)."""
+    engine = make_engine(settings)
+    try:
+        with make_sessionmaker(engine)() as session:
+            calibration = session.scalars(
+                select(Calibration).where(Calibration.id == calibration_id)
+            ).one()
+            return dict(calibration.result)
+    finally:
+        engine.dispose()
+
+
+def _run_clip_job(
+    settings: Settings,
+    client: httpx.Client,
+    auth: dict[str, str],
+    court_id: str,
+    clip: Path,
+    expected_status: str,
+) -> dict:
+    """Upload the clip, run its job in this process; the job as the API shows it."""
+    job_id = client.post(
+        f"/courts/{court_id}/calibrations", files=files(clip.read_bytes()), headers=auth
+    ).json()["job_id"]
+    assert run_one_job(settings) == expected_status
+    return client.get(f"/jobs/{job_id}", headers=auth).json()
+
+
+def test_clip_with_a_cut_uses_the_main_view(worker_settings: Settings, tmp_path: Path) -> None:
+    """Main camera, a close-up replay, the main camera again: the stored result says so."""
+    auth = {"Authorization": f"Bearer {new_key(worker_settings)}"}
+    genome = clips.main_camera(SIZE)
+    main = clips.render_clip_frames(genome, SIZE, 36, 31)
+    close_up = clips.render_clip_frames(clips.close_up_camera(SIZE), SIZE, 14, 32)
+    path = tmp_path / "cut.mp4"
+    clips.write_video(main[:20] + close_up + main[20:], path)
+    with api_client(create_app(worker_settings)) as client:
+        court_id = make_court(client, auth)
+        job = _run_clip_job(worker_settings, client, auth, court_id, path, "succeeded")
+        assert {"background.decode", "background.segmentation"} <= set(job["timings_s"])
+        info = _stored_result(worker_settings, job["calibration_id"])["background"]
+        # 960x540 clips are sampled every second frame: frames 0-18 and 34-48 are seen
+        assert info["frame_ranges"] == [[0, 18], [34, 48]]
+        assert info["cuts_s"] == [0.8, 1.36] and info["shots"] == 3
+        assert info["frames_used"] == worker_settings.background_frames
+        body = client.post(
+            "/project",
+            json={
+                "court_id": court_id,
+                "pixels": camera.floor_to_pixel(genome, MID_COURT_M).tolist(),
+            },
+            headers=auth,
+        ).json()
+        error_cm = 100 * np.linalg.norm(np.array(body["points"]) - MID_COURT_M, axis=1)
+        assert error_cm.max() < 5.0, error_cm
+
+
+def test_clip_without_a_static_view_fails(worker_settings: Settings, tmp_path: Path) -> None:
+    auth = {"Authorization": f"Bearer {new_key(worker_settings)}"}
+    court = clips.render_court_image(clips.main_camera(SIZE), SIZE, rng=33)
+    path = tmp_path / "zooming.mp4"
+    clips.write_video([clips.zoomed(court, 1.0 + 0.01 * i) for i in range(40)], path)
+    with api_client(create_app(worker_settings)) as client:
+        court_id = make_court(client, auth)
+        job = _run_clip_job(worker_settings, client, auth, court_id, path, "failed")
+        assert job["error"]["code"] == "no_static_view"
+        assert "no static view of the court longer than" in job["error"]["message"]

@@ -1,0 +1,24 @@
+"""A court's recent jobs (running, queued, failed and succeeded), newest first."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Query
+
+from app.api.deps import SessionDep, TenantDep
+from app.api.serialize import job_out
+from app.db import repo
+from app.schemas import JobList
+
+router = APIRouter(tags=["jobs"])
+
+
+@router.get("/courts/{court_id}/jobs", response_model=JobList)
+def list_court_jobs(
+    court_id: str,
+    session: SessionDep,
+    tenant_id: TenantDep,
+    limit: Annotated[int, Query(ge=1, le=200)] = 20,
+) -> JobList:
+    return JobList(jobs=[job_out(j) for j in repo.list_jobs(session, tenant_id, court_id, limit)])
