@@ -112,7 +112,9 @@ def test_a_mirrored_line_is_set_aside_once_the_camera_is_known():
     evidence = lines.line_evidence(image)
     model = court.court_model()
     short_y = model.node("short_left")[1]
-    mirrored = camera.project_visible(genome, np.array([[-x, short_y, 0.0] for x in (0.5, 0.8, 1.1)]))
+    mirrored = camera.project_visible(
+        genome, np.array([[-x, short_y, 0.0] for x in (0.5, 0.8, 1.1)])
+    )
     real = camera.project_visible(genome, np.array([[x, short_y, 0.0] for x in (0.5, 0.8, 1.1)]))
     at = lambda mask, px: mask[tuple(np.round(px[:, ::-1]).astype(int).T)]  # noqa: E731
     near_mirror = at(_dilated(evidence.mask(lines.RIDGE)), mirrored)

@@ -33,9 +33,7 @@ def _image_lines(genome: np.ndarray, names: list[str]) -> segments.ImageLines:
     )
 
 
-def _floor_error_px(
-    truth: np.ndarray, genomes: np.ndarray, walls_too: bool = False
-) -> np.ndarray:
+def _floor_error_px(truth: np.ndarray, genomes: np.ndarray, walls_too: bool = False) -> np.ndarray:
     """Median pixel error of the floor grid (or of the court's nodes, walls included)."""
     grid = court.court_model().nodes if walls_too else floor_grid()
     true_px = camera.project_visible(truth, grid)
@@ -74,7 +72,9 @@ def test_a_cropped_photo_is_found_with_the_vertical():
     truth[camera.GENE["c_v"]] -= 0.1 * SIZE[1]
     floor_only = _image_lines(truth, FLOOR_LINES)
     model = court.court_model()
-    without = search.floor_hypotheses(floor_only, search.vanishing_groups(floor_only), model, SIZE, None)
+    without = search.floor_hypotheses(
+        floor_only, search.vanishing_groups(floor_only), model, SIZE, None
+    )
     with_walls = _image_lines(truth, FLOOR_LINES + WALL_CORNERS)
     groups = search.vanishing_groups(with_walls)
     found = search.floor_hypotheses(with_walls, groups, model, SIZE, None)

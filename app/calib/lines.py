@@ -56,8 +56,8 @@ CLUTTER_WINDOW_PX = 24
 CLUTTER_MIN_DENSITY = 0.08
 CLUTTER_MIN_DIRECTIONS = 4.0
 
-RIDGE = np.uint8(1)
-STEP = np.uint8(2)
+RIDGE = 1
+STEP = 2
 
 
 @dataclass(frozen=True)
@@ -84,7 +84,7 @@ class LineEvidence:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.kind.shape  # type: ignore[return-value]
+        return (int(self.kind.shape[0]), int(self.kind.shape[1]))
 
     def mask(self, kinds: int = RIDGE | STEP) -> np.ndarray:
         """bool (H, W): evidence pixels of the given kinds, not ignored."""
@@ -379,7 +379,9 @@ def clutter_mask(kind: np.ndarray, normal: np.ndarray) -> np.ndarray:
     window = (CLUTTER_WINDOW_PX // 2, CLUTTER_WINDOW_PX // 2)
     counts = np.empty((n_bins, half[1], half[0]), np.float32)
     for b in range(n_bins):
-        share = cv2.resize((on & (bins == b)).astype(np.float32), half, interpolation=cv2.INTER_AREA)
+        share = cv2.resize(
+            (on & (bins == b)).astype(np.float32), half, interpolation=cv2.INTER_AREA
+        )
         counts[b] = cv2.boxFilter(share, -1, window)
     total = counts.sum(axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -404,7 +406,15 @@ def line_evidence(image: np.ndarray, ignore: np.ndarray | None = None) -> LineEv
     smooth = cv2.GaussianBlur(lab, (0, 0), 0.7)
     min_contrast = max(MIN_RIDGE_CONTRAST, RIDGE_CONTRAST_OVER_NOISE * noise)
     _ridge_centres(
-        response, normal, sigma_map, smooth, min_contrast, MAX_SIDE_ASYMMETRY, kind, offset, contrast
+        response,
+        normal,
+        sigma_map,
+        smooth,
+        min_contrast,
+        MAX_SIDE_ASYMMETRY,
+        kind,
+        offset,
+        contrast,
     )
 
     lightness = cv2.GaussianBlur(lab[:, :, 0], (0, 0), 1.0)
@@ -472,7 +482,7 @@ class EvidenceMaps:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.ignore.shape  # type: ignore[return-value]
+        return (int(self.ignore.shape[0]), int(self.ignore.shape[1]))
 
 
 def _nearest(mask: np.ndarray, index_of_pixel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

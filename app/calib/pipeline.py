@@ -33,6 +33,7 @@ from app.calib.court import COURT_SPECS, CourtModel, court_model, sample_edges
 from app.calib.fitness import population_fitness
 from app.calib.ga import DEFAULT_BUNDLE, GAResult, get_bundle, run_ga
 from app.calib.ga.engine import bundle_fitness_map
+from app.calib.quality import Verdict
 
 ProgressFn = Callable[[str, float, dict[str, Any]], None]
 
@@ -97,7 +98,7 @@ class CalibrationResult:
     refined_from: str  # which hypothesis won: "lines", "grid", "start" or "ga"
     timings_s: dict[str, float]
     quality: dict[str, float]
-    verdict: quality.Verdict
+    verdict: Verdict
     camera_model: str
     uncertainty: dict[str, Any]
     convergence: list[dict[str, Any]] = field(default_factory=list)

@@ -107,6 +107,8 @@ def edge_hit_probability(model: CourtModel) -> np.ndarray:
             kind = "floor_junction"
         out[e] = P_HIT_BY_EDGE[kind]
     return out
+
+
 # Distinct hypotheses: reference floor points must differ by this share of the image width.
 DISTINCT_SHARE_OF_WIDTH = 0.02
 
@@ -145,7 +147,9 @@ def _consistency_matrix(
     sin_angle = np.abs(
         towards[:, :, 0] * direction[None, :, 1] - towards[:, :, 1] * direction[None, :, 0]
     )
-    allowed = VANISHING_MAX_ANGLE_RAD + np.arctan(2.0 * VANISHING_ENDPOINT_PX / np.maximum(length, 1))
+    allowed = VANISHING_MAX_ANGLE_RAD + np.arctan(
+        2.0 * VANISHING_ENDPOINT_PX / np.maximum(length, 1)
+    )
     return sin_angle <= np.sin(allowed)[None, :]
 
 
@@ -191,7 +195,9 @@ def vanishing_groups(lines: ImageLines, n_groups: int = 5) -> list[VanishingGrou
         points.append(vp)
         free &= ~_consistency_matrix(vp[None, :], mid, direction, length)[0]
     groups = []
-    all_members = _consistency_matrix(np.array(points), mid, direction, length) if points else []
+    all_members: np.ndarray | list[np.ndarray] = (
+        _consistency_matrix(np.array(points), mid, direction, length) if points else []
+    )
     for vp, members in zip(points, all_members, strict=True):
         idx = np.flatnonzero(members)
         groups.append(VanishingGroup(vp, idx, float(support[idx].sum())))
@@ -260,9 +266,7 @@ def _intersect(l1: np.ndarray, l2: np.ndarray) -> tuple[float, float, bool]:
 
 
 @numba.njit(cache=True, inline="always")
-def _focal_of_floor_homography(
-    h: np.ndarray, focal_min: float, focal_max: float
-) -> float:
+def _focal_of_floor_homography(h: np.ndarray, focal_min: float, focal_max: float) -> float:
     """Focal length (px) of a floor homography `h` (court floor (x, y, 1) -> image pixels relative
     to the principal point) under square pixels, or -1 if it is not that of a rotation.
 
@@ -546,14 +550,14 @@ def _hypotheses_njit(
     for i in range(n_a):
         for j in range(i + 1, n_a):
             for kk in range(n_b):
-                for l in range(kk + 1, n_b):
+                for ll in range(kk + 1, n_b):
                     ok = True
                     for m, (la, lb) in enumerate(
                         (
                             (across_lines[i], along_lines[kk]),
-                            (across_lines[i], along_lines[l]),
+                            (across_lines[i], along_lines[ll]),
                             (across_lines[j], along_lines[kk]),
-                            (across_lines[j], along_lines[l]),
+                            (across_lines[j], along_lines[ll]),
                         )
                     ):
                         x, y, good = _intersect(la, lb)
@@ -573,7 +577,7 @@ def _hypotheses_njit(
                     )
                     if area < min_area:
                         continue
-                    # unit square (X' along the `along` pair kk->l, Y' across i->j) -> image
+                    # unit square (X' along the `along` pair kk->ll, Y' across i->j) -> image
                     hu = _square_to_quad(quad)
                     if hu[2, 2] == 0.0:
                         continue
@@ -581,32 +585,36 @@ def _hypotheses_njit(
                     # the quadrangles of the strongest lines; they depend on the quadrangle and
                     # the ratio of the assignment's x and y spans only
                     n_alt = 0
-                    if with_vertical and i < n_alt_lines and j < n_alt_lines:
-                        if kk < n_alt_lines and l < n_alt_lines:
-                            for u in range(ratios2.shape[0]):
-                                for square in (True, False):
-                                    if not _intrinsics_with_vertical(
-                                        hu[:, 0].copy(), hu[:, 1].copy(), ratios2[u], vertical,
-                                        square, width, k,
+                    if with_vertical and max(i, j, kk, ll) < n_alt_lines:
+                        for u in range(ratios2.shape[0]):
+                            for square in (True, False):
+                                if not _intrinsics_with_vertical(
+                                    hu[:, 0].copy(),
+                                    hu[:, 1].copy(),
+                                    ratios2[u],
+                                    vertical,
+                                    square,
+                                    width,
+                                    k,
+                                ):
+                                    continue
+                                if not (focal_min <= k[0] <= focal_max):
+                                    continue
+                                if square:
+                                    shift = np.sqrt(k[2] * k[2] + k[3] * k[3])
+                                    if shift < ALTERNATIVE_MIN_OFFSET_SHARE * width:
+                                        continue
+                                    if abs(k[2]) > 0.5 * width or abs(k[3]) > 0.5 * height:
+                                        continue
+                                else:
+                                    aspect = k[1] / k[0]
+                                    if abs(aspect - 1.0) < ALTERNATIVE_MIN_ASPECT_CHANGE or not (
+                                        ASPECT_RANGE[0] <= aspect <= ASPECT_RANGE[1]
                                     ):
                                         continue
-                                    if not (focal_min <= k[0] <= focal_max):
-                                        continue
-                                    if square:
-                                        shift = np.sqrt(k[2] * k[2] + k[3] * k[3])
-                                        if shift < ALTERNATIVE_MIN_OFFSET_SHARE * width:
-                                            continue
-                                        if abs(k[2]) > 0.5 * width or abs(k[3]) > 0.5 * height:
-                                            continue
-                                    else:
-                                        aspect = k[1] / k[0]
-                                        if abs(aspect - 1.0) < ALTERNATIVE_MIN_ASPECT_CHANGE or not (
-                                            ASPECT_RANGE[0] <= aspect <= ASPECT_RANGE[1]
-                                        ):
-                                            continue
-                                    alt_k[n_alt] = k
-                                    alt_ratio2[n_alt] = ratios2[u]
-                                    n_alt += 1
+                                alt_k[n_alt] = k
+                                alt_ratio2[n_alt] = ratios2[u]
+                                n_alt += 1
                     for p in range(across_values.shape[0]):
                         for q in range(across_values.shape[0]):
                             if p == q:
@@ -637,7 +645,10 @@ def _hypotheses_njit(
                                         out_k[n_out, 3] = 0.0
                                         n_out += 1
                                     for alt in range(n_alt):
-                                        if abs((dx * dx) / (dy * dy) / alt_ratio2[alt] - 1.0) > 1e-9:
+                                        if (
+                                            abs((dx * dx) / (dy * dy) / alt_ratio2[alt] - 1.0)
+                                            > 1e-9
+                                        ):
                                             continue
                                         if n_out >= cap:
                                             return n_out
@@ -730,6 +741,7 @@ def could_be_orthogonal(
     for a square-pixel camera whose principal point is near `centre`: (v_a - c).(v_b - c) =
     -f^2 w_a w_b, so the vectors from c towards them must make an angle of at least ~90 degrees
     (exactly 90 when one is at infinity), with a margin for a principal point off centre."""
+
     def toward(vp: np.ndarray) -> tuple[np.ndarray, bool]:
         if abs(vp[2]) < 1e-9 * np.linalg.norm(vp[:2]):
             return vp[:2] / np.linalg.norm(vp[:2]), True
@@ -857,7 +869,9 @@ def distinct_homographies(
         pixels = mapped[..., :2] / mapped[..., 2:3]
     cell = DISTINCT_HOMOGRAPHY_SHARE * image_width
     cells = np.clip(np.round(pixels / cell), -(2**20), 2**20)
-    cells = np.where(np.isfinite(cells), cells, 2**20).astype(np.int64).reshape(len(homographies), -1)
+    cells = (
+        np.where(np.isfinite(cells), cells, 2**20).astype(np.int64).reshape(len(homographies), -1)
+    )
     aspect = np.round(20.0 * intrinsics[:, 1] / intrinsics[:, 0]).astype(np.int64)
     shift = np.round(intrinsics[:, 2:4] / cell).astype(np.int64)
     cells = np.column_stack([cells, aspect, shift])
@@ -876,7 +890,10 @@ def could_be_vertical(vp: np.ndarray, centre: np.ndarray) -> bool:
     if abs(vp[2]) < 1e-12 * np.linalg.norm(vp[:2]):
         return False  # vertical lines parallel in the image: a level camera, no principal point
     d = vp[:2] / vp[2] - centre
-    return abs(np.arctan2(d[0], abs(d[1]))) <= MAX_ROLL_RAD + np.deg2rad(10.0) and abs(d[1]) > centre[1]
+    return (
+        abs(np.arctan2(d[0], abs(d[1]))) <= MAX_ROLL_RAD + np.deg2rad(10.0)
+        and abs(d[1]) > centre[1]
+    )
 
 
 @dataclass(frozen=True)
@@ -1411,7 +1428,9 @@ _NEAR_DEPTH_M = 0.1
 
 
 @numba.njit(cache=True)
-def _clip_polygon(poly: np.ndarray, n: int, axis: int, limit: float, keep_above: bool, out: np.ndarray) -> int:
+def _clip_polygon(
+    poly: np.ndarray, n: int, axis: int, limit: float, keep_above: bool, out: np.ndarray
+) -> int:
     """Sutherland-Hodgman: the part of polygon poly[:n] with coordinate `axis` >= limit (or <=)."""
     m = 0
     for i in range(n):
@@ -1452,7 +1471,10 @@ def _floor_share_njit(
         for k in range(n0):
             for a in range(3):
                 cam[k, a] = (
-                    r[a, 0] * outline[k, 0] + r[a, 1] * outline[k, 1] + r[a, 2] * outline[k, 2] + t[a]
+                    r[a, 0] * outline[k, 0]
+                    + r[a, 1] * outline[k, 1]
+                    + r[a, 2] * outline[k, 2]
+                    + t[a]
                 )
         n = _clip_polygon(cam, n0, 2, _NEAR_DEPTH_M, True, clipped)
         if n < 3:
@@ -1495,9 +1517,13 @@ def floor_outline(model: CourtModel) -> np.ndarray:
     """The floor's boundary (4 * _FLOOR_EDGE_PIECES, 3), corners and points between them, so a
     distorting lens bends its edges."""
     width, length = model.spec.width_m, model.spec.length_m
-    corners = np.array([[0.0, 0.0, 0.0], [width, 0.0, 0.0], [width, length, 0.0], [0.0, length, 0.0]])
+    corners = np.array(
+        [[0.0, 0.0, 0.0], [width, 0.0, 0.0], [width, length, 0.0], [0.0, length, 0.0]]
+    )
     s = np.linspace(0.0, 1.0, _FLOOR_EDGE_PIECES, endpoint=False)[:, None]
-    return np.concatenate([a + s * (b - a) for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True)])
+    return np.concatenate(
+        [a + s * (b - a) for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True)]
+    )
 
 
 def floor_shares(genomes: np.ndarray, model: CourtModel, image_size: tuple[int, int]) -> np.ndarray:

@@ -320,9 +320,7 @@ def _order_along(points: np.ndarray) -> np.ndarray:
     return np.argsort(centred @ vecs[:, 1], kind="stable")
 
 
-def segments_of(
-    chains: Chains, undistortion: Undistortion, min_length_px: float
-) -> Segments:
+def segments_of(chains: Chains, undistortion: Undistortion, min_length_px: float) -> Segments:
     """Straight pieces (undistorted frame) of every chain, at least `min_length_px` long."""
     rows = []
     for c in range(len(chains)):
@@ -463,8 +461,13 @@ def merge_collinear(segments: Segments) -> ImageLines:
             lines.append(line)
     if not lines:
         return ImageLines(
-            np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(0),
-            np.zeros(0), (),
+            np.zeros((0, 2)),
+            np.zeros(0),
+            np.zeros((0, 2, 2)),
+            np.zeros(0),
+            np.zeros(0),
+            np.zeros(0),
+            (),
         )
     lines.sort(key=lambda line: -line["support"])
     return ImageLines(

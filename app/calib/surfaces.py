@@ -107,9 +107,14 @@ def evidence_on_court(
     )
     keep = (labels == FLOOR) | (labels == FRONT) | (near_lines > 0)
     # the floor's own junctions with the walls sit on the boundary of the floor's label
-    keep |= cv2.dilate(
-        (labels == FLOOR).astype(np.uint8), np.ones((3, 3), np.uint8), iterations=int(tolerance_px) + 1
-    ) > 0
+    keep |= (
+        cv2.dilate(
+            (labels == FLOOR).astype(np.uint8),
+            np.ones((3, 3), np.uint8),
+            iterations=int(tolerance_px) + 1,
+        )
+        > 0
+    )
     return LineEvidence(
         kind=evidence.kind,
         normal_rad=evidence.normal_rad,
