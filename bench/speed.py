@@ -78,8 +78,11 @@ class GACall:
     result: Any  # GAResult
 
 
-def calibrate_with_ga(image: Any, start: Any, seed: int) -> tuple[Any, GACall]:
-    """`pipeline.calibrate` with the default (N = 16) bundle: (its result, its run_ga call)."""
+def calibrate_with_ga(
+    image: Any, start: Any, seed: int, max_generations: int | None = None
+) -> tuple[Any, GACall]:
+    """`pipeline.calibrate` with the default (N = 16) bundle: (its result, its run_ga call).
+    `max_generations` None keeps the pipeline's default."""
     from app.calib import pipeline
     from app.calib.ga import DEFAULT_BUNDLE, run_ga
 
@@ -91,8 +94,9 @@ def calibrate_with_ga(image: Any, start: Any, seed: int) -> tuple[Any, GACall]:
         return result
 
     with mock.patch.object(pipeline, "run_ga", recording_run_ga):
+        limit = {} if max_generations is None else {"max_generations": max_generations}
         result = pipeline.calibrate(
-            image, start_genome=start, bundle=DEFAULT_BUNDLE.name, seed=seed
+            image, start_genome=start, bundle=DEFAULT_BUNDLE.name, seed=seed, **limit
         )
     (call,) = calls
     return result, call

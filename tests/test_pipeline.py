@@ -202,12 +202,28 @@ def test_no_court_raises_court_not_found(kind):
         pipeline.calibrate(image)
 
 
-@pytest.mark.parametrize("kind", ["badminton", "tennis", "volleyball"])
-def test_another_sports_court_is_not_taken_for_a_squash_court(kind):
+@pytest.mark.parametrize("kind", ["badminton", "tennis", "volleyball", "checkerboard", "text_page"])
+def test_another_sports_court_or_a_pattern_is_not_taken_for_a_squash_court(kind):
     negative = cases.make_negative(kind, 100)
     with pytest.raises(pipeline.CourtNotFound) as info:
         pipeline.calibrate(negative.image)
     assert info.value.reasons
+
+
+def test_a_view_of_the_front_wall_alone_is_refused_because_the_floor_is_not_pinned():
+    # the front wall's lines and the wall corners fit many cameras: with no floor line along the
+    # court, feet cannot be placed, so the verdict must refuse and say to film more of the floor
+    truth = search.look_at_genomes(
+        np.array([[3.2, 4.0, -1.8]]),
+        np.array([[3.2, 0.0, -2.6]]),
+        np.zeros(1),
+        np.array([747.0]),
+        SIZE,
+    )[0]
+    photo = scene.render_court_image(truth, SIZE, rng=5)
+    with pytest.raises(pipeline.CourtNotFound) as info:
+        pipeline.calibrate(photo)
+    assert any("floor" in reason for reason in info.value.reasons)
 
 
 def test_a_doubles_court_is_calibrated_under_its_own_spec():

@@ -362,28 +362,18 @@ def refine_candidates(
     samples: refine.FitSamples,
     maps: lines.EvidenceMaps,
     verify: search.VerifySamples,
-    model: CourtModel,
     image_size: tuple[int, int],
 ) -> tuple[int, refine.Fit, np.ndarray]:
-    """Refine each candidate (pinhole + k1, coarse to fine) and pick the winner: a camera the
-    verdict takes for a court beats one it refuses (good before check), then the higher score.
-    A wrong camera can explain more line length than the right one (a zoomed view's across lines
-    laid on stripes, say) yet not look like a squash court: the verdict's rules say what does.
-    Returns the winner's index, its fit and every refined candidate's score."""
+    """Refine each candidate (pinhole + k1, coarse to fine) and pick the one with the highest
+    score. Ranking by the verdict first (a camera it takes beats a higher-scoring one it refuses)
+    was measured and dropped: it lets the verdict judge several cameras per picture, and on other
+    sports' courts one of them then passes. Returns the winner's index, its fit and every
+    refined candidate's score."""
     taus = refine_taus(image_size[0])
     fits = [refine.refine_coarse_to_fine(g, samples, maps, taus) for g in candidates]
     genomes = np.array([f.genome for f in fits])
     scores = score_cameras(genomes, verify, maps, image_size)
-    shares = search.floor_shares(genomes, model, image_size)
-    order = {"good": 2, "check": 1, "not_a_court": 0}
-    ranks = np.zeros(len(fits))
-    for k, fit in enumerate(fits):
-        if not np.isfinite(scores[k]):
-            continue
-        figures = quality.quality_figures(fit.genome, verify, maps, model, image_size[0])
-        figures["floor_share"] = float(shares[k])
-        ranks[k] = order[quality.verdict(figures).label]
-    best = max(range(len(fits)), key=lambda k: (ranks[k], scores[k]))
+    best = int(np.argmax(scores))
     return best, fits[best], scores
 
 
@@ -591,7 +581,7 @@ def calibrate(
     t0 = time.perf_counter()
     report("refining", 0.0, {})
     samples = refine.fit_samples(model, spacing)
-    best, fit, refined_scores = refine_candidates(candidates, samples, maps, verify, model, size)
+    best, fit, refined_scores = refine_candidates(candidates, samples, maps, verify, size)
     report("refining", 0.4, {})
     # with the camera known, what lies off the court (reflections in glass walls, crowds and
     # adverts seen on or through them) is set aside for the final fit and the verdict
