@@ -2,8 +2,8 @@
 
 Stages (each reported through `progress(stage, fraction, info)`):
 1. "edges": the line evidence (`lines.line_evidence`: painted-line ridges and junction steps,
-   with orientation and sub-pixel position; players and clutter masked), or Canny edges with
-   `edges="canny"` (the paper's baseline).
+   with orientation and sub-pixel position; players and clutter masked). An edge image (the
+   paper's input, e.g. Canny edges) is used as it is.
 2. "optimising": the global search (`segments`, `search`): image lines, their vanishing groups,
    floor homographies from two lines across and two along the court, plus typical placements
    and the start camera if one is given, all verified on the evidence; the best few distinct
