@@ -210,6 +210,17 @@ def test_another_sports_court_or_a_pattern_is_not_taken_for_a_squash_court(kind)
     assert info.value.reasons
 
 
+@pytest.mark.slow
+def test_a_room_with_court_like_lines_is_refused():
+    # bench.synthetic's negative room 1001: lines on floor and walls that a wrong squash camera
+    # half explains (13 edges supported, walls included); refused because it explains too little
+    # of the court above chance
+    negative = cases.make_negative("room", 1001)
+    with pytest.raises(pipeline.CourtNotFound) as info:
+        pipeline.calibrate(negative.image)
+    assert any("by chance" in reason for reason in info.value.reasons)
+
+
 def test_a_view_of_the_front_wall_alone_is_refused_because_the_floor_is_not_pinned():
     # the front wall's lines and the wall corners fit many cameras: with no floor line along the
     # court, feet cannot be placed, so the verdict must refuse and say to film more of the floor
