@@ -41,7 +41,7 @@ import numpy as np
 
 from app.calib.court import CourtModel
 from app.calib.lines import EvidenceMaps
-from app.calib.search import MIN_FLOOR_SHARE, VerifySamples, edge_support
+from app.calib.search import VerifySamples, edge_support
 
 # tight tolerance of the verdict (px at 1920 px wide; never below 1.5 px)
 VERDICT_TOLERANCE_PX_AT_1920 = 3.0
@@ -56,10 +56,14 @@ MIN_SUPPORTED_SHARE_OF_EDGES = 0.5
 MIN_WALL_EDGES = 1
 MIN_FLOOR_ACROSS = 3
 MIN_FLOOR_ALONG = 2
-# on bench.synthetic (seeds 1000+, 96 views, 36 negatives) every camera within 5 cm on the floor
-# that the other rules accepted had support_excess >= 0.50 (median 0.63); a room with court-like
-# lines on floor and walls passed every other rule at 0.40: 0.45 sits between
-MIN_SUPPORT_EXCESS = 0.45
+MIN_SUPPORT_EXCESS = 0.35
+# feet are mapped on the floor: a camera whose court floor fills under a tenth of the picture
+# is no use for that, and on bench.synthetic (seeds 1000+, 96 views, 36 negatives) every camera
+# within 5 cm on the floor had a floor share of 0.165 or more, while a room with court-like
+# lines on floor and walls passed every other rule at 0.066. (A support-above-chance floor of
+# 0.45 separated that room too, but real courts' worn and hidden lines give right cameras less
+# support than renders do: one of the dev images' right cameras had 0.43.)
+MIN_FLOOR_SHARE_OF_PICTURE = 0.10
 GOOD_SUPPORT_EXCESS = 0.55
 MAX_FLOOR_ERROR_T_CM = 30.0
 GOOD_FLOOR_ERROR_T_CM = 8.0
@@ -192,7 +196,7 @@ def verdict(figures: dict[str, float]) -> Verdict:
             "the lines in view do not pin the camera down (expected floor error at the T "
             f"{floor_t:.0f} cm)"
         )
-    if figures.get("floor_share", 1.0) < MIN_FLOOR_SHARE:
+    if figures.get("floor_share", 1.0) < MIN_FLOOR_SHARE_OF_PICTURE:
         refusals.append(
             f"the court's floor would fill only {figures['floor_share']:.0%} of the picture: "
             "film the floor, where the players' feet are"
