@@ -25,7 +25,7 @@ from sqlalchemy import Engine
 
 from app.calib.background import ClipError, background_from_clip, background_from_frames
 from app.db import media, queue
-from app.db.models import Calibration, new_id
+from app.db.models import Calibration, JobStage, new_id
 from app.db.session import make_engine
 from app.settings import Settings
 from worker.media import MediaError, load_frames
@@ -33,12 +33,12 @@ from worker.media import MediaError, load_frames
 log = logging.getLogger("squashcal.worker")
 
 # Overall job progress at the start of each stage; the stage's own fraction fills its span.
-STAGE_SPANS: dict[str, tuple[float, float]] = {
-    "background": (0.0, 0.05),
-    "edges": (0.05, 0.1),
-    "optimising": (0.1, 0.9),
-    "refining": (0.9, 0.95),
-    "storing": (0.95, 1.0),
+STAGE_SPANS: dict[JobStage, tuple[float, float]] = {
+    JobStage.BACKGROUND: (0.0, 0.05),
+    JobStage.EDGES: (0.05, 0.1),
+    JobStage.OPTIMISING: (0.1, 0.9),
+    JobStage.REFINING: (0.9, 0.95),
+    JobStage.STORING: (0.95, 1.0),
 }
 # After the grace period, the main thread gets this long to notice the abort before the process
 # gives the job back and exits on its own.
@@ -81,7 +81,7 @@ class Heartbeat(threading.Thread):
         self.interval_s = settings.progress_interval_s
         self.shutdown = shutdown
         self._lock = threading.Lock()
-        self._latest = queue.Progress(stage="background", progress=0.0)
+        self._latest = queue.Progress(stage=JobStage.BACKGROUND, progress=0.0)
         self._dirty = True
         self._stop_event = threading.Event()
         self.abort_reason: str | None = None  # "lease_lost" | "shutdown"
@@ -90,7 +90,7 @@ class Heartbeat(threading.Thread):
     # -- called from the main thread
     def report(
         self,
-        stage: str,
+        stage: JobStage,
         fraction: float,
         generation: int | None = None,
         best_fitness: float | None = None,
@@ -109,10 +109,14 @@ class Heartbeat(threading.Thread):
         self.check()
 
     def pipeline_progress(self, stage: str, fraction: float, info: dict[str, Any]) -> None:
+        try:
+            job_stage = JobStage(stage)
+        except ValueError:  # a pipeline stage the jobs table does not know: keep the last one
+            job_stage = self._latest.stage
         generation = info.get("generation")
         best = info.get("best_fitness")
         self.report(
-            stage,
+            job_stage,
             fraction,
             int(generation) if generation is not None else None,
             float(best) if best is not None and np.isfinite(best) else None,
@@ -194,13 +198,13 @@ def process_job(
     t_start = time.perf_counter()
     cal_dir = None
     try:
-        heartbeat.report("background", 0.0)
+        heartbeat.report(JobStage.BACKGROUND, 0.0)
         t0 = time.perf_counter()
         background, moving_mask, background_info = _background(settings, job)
         timings["background"] = time.perf_counter() - t0
         for stage, seconds in background_info.get("timings_s", {}).items():
             timings[f"background.{stage}"] = float(seconds)
-        heartbeat.report("background", 1.0)
+        heartbeat.report(JobStage.BACKGROUND, 1.0)
 
         kwargs: dict[str, Any] = {"seed": int(job.params.get("seed") or 0), "spec": job.spec}
         if job.params.get("start_genome") is not None:
@@ -223,7 +227,7 @@ def process_job(
         for stage, seconds in result.timings_s.items():
             timings[f"calibrate.{stage}"] = float(seconds)
 
-        heartbeat.report("storing", 0.0)
+        heartbeat.report(JobStage.STORING, 0.0)
         t0 = time.perf_counter()
         calibration_id = new_id()
         cal_dir = media.calibration_dir(settings, calibration_id)

@@ -16,7 +16,7 @@ from typing import Any
 from sqlalchemy import Engine, or_, select, update
 from sqlalchemy.orm import Session
 
-from app.db.models import Calibration, Court, Job, utcnow
+from app.db.models import Calibration, Court, Job, JobStage, JobStatus, utcnow
 from app.db.session import write_engine
 
 
@@ -40,14 +40,24 @@ class ClaimedJob:
 
 @dataclass
 class Progress:
-    stage: str
+    stage: JobStage
     progress: float
     generation: int | None = None
     best_fitness: float | None = None
 
 
 def _expired(now: datetime) -> Any:
-    return (Job.status == "running") & (Job.lease_expires_at < now)
+    return (Job.status == JobStatus.RUNNING) & (Job.lease_expires_at < now)
+
+
+def _due(now: datetime) -> Any:
+    """Queued and past its retry backoff."""
+    return (Job.status == JobStatus.QUEUED) & (Job.run_after.is_(None) | (Job.run_after <= now))
+
+
+def retry_delay_s(attempt: int, base_s: float, max_s: float) -> float:
+    """Backoff before attempt `attempt + 1` after attempt `attempt` failed: base, 2 x base, ..."""
+    return min(max_s, base_s * 2.0 ** max(0, attempt - 1))
 
 
 def claim(
@@ -61,7 +71,8 @@ def claim(
             update(Job)
             .where(_expired(now), Job.attempts >= Job.max_attempts)
             .values(
-                status="failed",
+                status=JobStatus.FAILED,
+                stage=JobStage.DONE,
                 error_code="worker_lost",
                 error_message=(
                     "the worker running this job stopped responding (lease expired) and the job "
@@ -76,7 +87,7 @@ def claim(
         )
         candidate = (
             select(Job.id)
-            .where(or_(Job.status == "queued", _expired(now)), Job.attempts < Job.max_attempts)
+            .where(or_(_due(now), _expired(now)), Job.attempts < Job.max_attempts)
             .order_by(Job.created_at, Job.id)
             .limit(1)
             .with_for_update(skip_locked=True)
@@ -86,14 +97,16 @@ def claim(
             update(Job)
             .where(Job.id == candidate)
             .values(
-                status="running",
-                stage="background",
+                status=JobStatus.RUNNING,
+                stage=JobStage.BACKGROUND,
                 progress=0.0,
                 generation=None,
                 best_fitness=None,
                 attempts=Job.attempts + 1,
                 worker_id=worker_id,
                 lease_expires_at=now + timedelta(seconds=lease_s),
+                heartbeat_at=now,
+                run_after=None,
                 started_at=now,
                 updated_at=now,
             )
@@ -120,7 +133,7 @@ def claim(
 
 
 def _owned_running(job_id: str, worker_id: str) -> Any:
-    return (Job.id == job_id) & (Job.status == "running") & (Job.worker_id == worker_id)
+    return (Job.id == job_id) & (Job.status == JobStatus.RUNNING) & (Job.worker_id == worker_id)
 
 
 def heartbeat(
@@ -135,6 +148,7 @@ def heartbeat(
     now = now or utcnow()
     values: dict[str, Any] = {
         "lease_expires_at": now + timedelta(seconds=lease_s),
+        "heartbeat_at": now,
         "updated_at": now,
     }
     if progress is not None:
@@ -172,8 +186,8 @@ def finish_success(
             update(Job)
             .where(_owned_running(job.id, worker_id))
             .values(
-                status="succeeded",
-                stage="done",
+                status=JobStatus.SUCCEEDED,
+                stage=JobStage.DONE,
                 progress=1.0,
                 calibration_id=calibration.id,
                 error_code=None,
@@ -213,9 +227,11 @@ def finish_failure(
     retryable: bool,
     timings: dict[str, float] | None = None,
     now: datetime | None = None,
-) -> str:
-    """Record an error. Retryable errors requeue the job while attempts remain; returns the new
-    status ("queued" or "failed"). Raises LeaseLost if the job is not ours."""
+    retry_delay_s: float = 0.0,
+) -> JobStatus:
+    """Record an error. Retryable errors requeue the job while attempts remain, claimable again
+    `retry_delay_s` from now; returns the new status (queued or failed). Raises LeaseLost if the
+    job is not ours."""
     now = now or utcnow()
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
         row = session.execute(
@@ -224,17 +240,19 @@ def finish_failure(
         if row is None:
             raise LeaseLost(f"job {job_id} is no longer running under worker {worker_id}")
         attempts, max_attempts = row
-        status = "queued" if retryable and attempts < max_attempts else "failed"
+        requeue = retryable and attempts < max_attempts
+        status = JobStatus.QUEUED if requeue else JobStatus.FAILED
         values: dict[str, Any] = {
             "status": status,
-            "stage": "queued" if status == "queued" else "done",
+            "stage": JobStage.QUEUED if requeue else JobStage.DONE,
             "error_code": code,
             "error_message": message,
             "worker_id": None,
             "lease_expires_at": None,
+            "run_after": now + timedelta(seconds=retry_delay_s) if requeue else None,
             "updated_at": now,
         }
-        if status == "failed":
+        if not requeue:
             values["finished_at"] = now
         if timings is not None:
             values["timings"] = timings
@@ -257,8 +275,8 @@ def release(engine: Engine, job_id: str, worker_id: str, now: datetime | None = 
             update(Job)
             .where(_owned_running(job_id, worker_id))
             .values(
-                status="queued",
-                stage="queued",
+                status=JobStatus.QUEUED,
+                stage=JobStage.QUEUED,
                 attempts=Job.attempts - 1,
                 worker_id=None,
                 lease_expires_at=None,

@@ -12,7 +12,7 @@ from typing import Any, TypeVar
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session
 
-from app.db.models import ApiKey, Calibration, Court, Job, Tenant, utcnow
+from app.db.models import ApiKey, Calibration, Court, Job, JobStage, JobStatus, Tenant, utcnow
 
 KEY_PREFIX = "sqc_"
 
@@ -133,8 +133,8 @@ def new_job(
         media_files=media_files,
         params=params,
         max_attempts=max_attempts,
-        status="queued",
-        stage="queued",
+        status=JobStatus.QUEUED,
+        stage=JobStage.QUEUED,
         timings={},
     )
     session.add(job)

@@ -6,10 +6,11 @@ import threading
 from datetime import timedelta
 
 import pytest
-from sqlalchemy import select
+from sqlalchemy import select, text
+from sqlalchemy.exc import IntegrityError
 
 from app.db import queue, repo
-from app.db.models import Calibration, Court, Job, new_id, utcnow
+from app.db.models import Calibration, Court, Job, JobStage, JobStatus, new_id, utcnow
 from app.db.session import make_engine, make_sessionmaker
 from app.settings import Settings
 
@@ -206,3 +207,43 @@ def test_newest_upload_stays_the_active_camera(engine) -> None:
         assert court is not None and court.active_calibration_id == newer_cal.id
         assert len(session.scalars(select(Calibration)).all()) == 2
     assert job_row(engine, newer_id).calibration_id == newer_cal.id
+
+
+def test_retry_waits_out_its_backoff(engine) -> None:
+    _, [job_id] = add_jobs(engine, 1, max_attempts=3)
+    now = utcnow()
+    assert queue.claim(engine, "w", lease_s=60, now=now) is not None
+    status = queue.finish_failure(
+        engine, job_id, "w", "internal_error", "boom", True, now=now, retry_delay_s=5.0
+    )
+    assert status == JobStatus.QUEUED
+    assert job_row(engine, job_id).run_after == now + timedelta(seconds=5)
+    assert queue.claim(engine, "w", lease_s=60, now=now + timedelta(seconds=4.9)) is None
+    again = queue.claim(engine, "w", lease_s=60, now=now + timedelta(seconds=5))
+    assert again is not None and again.attempt == 2
+    assert job_row(engine, job_id).run_after is None
+
+
+def test_retry_delay_doubles_up_to_its_cap() -> None:
+    delays = [queue.retry_delay_s(attempt, base_s=5, max_s=30) for attempt in (1, 2, 3, 4, 5)]
+    assert delays == [5, 10, 20, 30, 30]
+
+
+def test_claim_and_heartbeat_record_the_workers_last_sign_of_life(engine) -> None:
+    _, [job_id] = add_jobs(engine, 1)
+    now = utcnow()
+    assert queue.claim(engine, "w", lease_s=10, now=now) is not None
+    assert job_row(engine, job_id).heartbeat_at == now
+    assert queue.heartbeat(engine, job_id, "w", lease_s=10, now=now + timedelta(seconds=2))
+    row = job_row(engine, job_id)
+    assert row.heartbeat_at == now + timedelta(seconds=2)
+    assert row.lease_expires_at == now + timedelta(seconds=12)
+
+
+@pytest.mark.parametrize("column", ["status", "stage"])
+def test_the_database_refuses_unknown_status_and_stage(engine, column: str) -> None:
+    _, [job_id] = add_jobs(engine, 1)
+    with pytest.raises(IntegrityError), engine.begin() as conn:
+        conn.execute(text(f"UPDATE jobs SET {column} = 'paused' WHERE id = :id"), {"id": job_id})
+    row = job_row(engine, job_id)
+    assert (row.status, row.stage) == (JobStatus.QUEUED, JobStage.QUEUED)
