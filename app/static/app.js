@@ -38,6 +38,10 @@ const ADVICE = {
   court_not_found: "We could not find the court's lines. Re-film with the camera still, the whole floor and the front wall in view, the lights on and the lens clean.",
   worker_lost: "The calibration stopped half way on our side. Upload the same footage again.",
   calibration_error: "Something went wrong on our side while calibrating. Try again; if it keeps failing, tell your service operator.",
+  internal_error: "Something went wrong on our side while calibrating. Try again; if it keeps failing, tell your service operator.",
+  database_error: "Our database was briefly unavailable. The calibration is retried by itself.",
+  storage_error: "Our storage failed while calibrating. The calibration is retried by itself.",
+  out_of_memory: "The calibration ran out of memory on our side. Try fewer or smaller photos.",
   invalid_input: "The footage could not be used. Send a clip or photos of a squash court.",
   unauthorized: "The API key was not accepted. Check it, or ask for a new one.",
 };
