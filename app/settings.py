@@ -43,6 +43,10 @@ class Settings(BaseSettings):
     # a retryable failure waits retry_backoff_s, then twice that, ... (at most retry_backoff_max_s)
     retry_backoff_s: float = Field(default=5.0, ge=0)
     retry_backoff_max_s: float = Field(default=300.0, ge=0)
+    # A tenant with this many jobs waiting gets 429 (Retry-After: queue_full_retry_after_s) for
+    # more uploads: one tenant cannot fill the queue (or the disk) for everyone.
+    max_queued_jobs_per_tenant: int = Field(default=50, ge=1)
+    queue_full_retry_after_s: int = Field(default=30, ge=1)
 
     # Calibration run (None = the pipeline's own defaults)
     ga_time_budget_s: float | None = Field(default=None, gt=0)

@@ -2,7 +2,9 @@
 
 Every state change updates only rows in the state it expects (status and owning worker), so a worker
 whose lease expired and whose job was re-claimed elsewhere cannot overwrite the new owner's work.
-Claims are atomic: on SQLite the transaction starts with BEGIN IMMEDIATE (one writer at a time, so
+Claims are fair across tenants: the next job is the oldest of the tenant with the fewest running
+jobs. On PostgreSQL two workers claiming at the same instant may both count the same running jobs,
+so fairness is approximate there; exclusivity is not. Claims are atomic: on SQLite the transaction starts with BEGIN IMMEDIATE (one writer at a time, so
 the select-then-update inside one UPDATE statement cannot race); on PostgreSQL the candidate row is
 locked with FOR UPDATE SKIP LOCKED so concurrent workers pick different jobs without waiting.
 """
@@ -13,8 +15,8 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta
 from typing import Any
 
-from sqlalchemy import Engine, or_, select, update
-from sqlalchemy.orm import Session
+from sqlalchemy import Engine, func, or_, select, update
+from sqlalchemy.orm import Session, aliased
 
 from app.db.models import Calibration, Court, Job, JobStage, JobStatus, utcnow
 from app.db.session import write_engine
@@ -60,10 +62,27 @@ def retry_delay_s(attempt: int, base_s: float, max_s: float) -> float:
     return min(max_s, base_s * 2.0 ** max(0, attempt - 1))
 
 
+def _running_jobs_of_the_same_tenant(now: datetime) -> Any:
+    """For a candidate row of `jobs`: how many jobs its tenant has running (live leases only)."""
+    busy = aliased(Job, name="busy")
+    return (
+        select(func.count(busy.id))
+        .where(
+            busy.tenant_id == Job.tenant_id,
+            busy.status == JobStatus.RUNNING,
+            busy.lease_expires_at >= now,
+        )
+        .correlate(Job)
+        .scalar_subquery()
+    )
+
+
 def claim(
     engine: Engine, worker_id: str, lease_s: float, now: datetime | None = None
 ) -> ClaimedJob | None:
-    """Atomically take the oldest claimable job (queued, or running with an expired lease)."""
+    """Atomically take a claimable job (queued and due, or running with an expired lease): the
+    oldest of the tenant with the fewest running jobs, so that one tenant's pile of uploads does
+    not hold back another tenant's single one."""
     now = now or utcnow()
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
         # A job whose worker died on its last attempt will never be retried: fail it with a reason.
@@ -88,7 +107,7 @@ def claim(
         candidate = (
             select(Job.id)
             .where(or_(_due(now), _expired(now)), Job.attempts < Job.max_attempts)
-            .order_by(Job.created_at, Job.id)
+            .order_by(_running_jobs_of_the_same_tenant(now), Job.created_at, Job.id)
             .limit(1)
             .with_for_update(skip_locked=True)
             .scalar_subquery()

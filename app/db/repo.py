@@ -9,7 +9,7 @@ import secrets
 from collections.abc import Sequence
 from typing import Any, TypeVar
 
-from sqlalchemy import select, update
+from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from app.db.models import ApiKey, Calibration, Court, Job, JobStage, JobStatus, Tenant, utcnow
@@ -140,6 +140,17 @@ def new_job(
     session.add(job)
     session.flush()
     return job
+
+
+def count_queued_jobs(session: Session, tenant_id: str) -> int:
+    return int(
+        session.scalar(
+            select(func.count(Job.id)).where(
+                Job.tenant_id == tenant_id, Job.status == JobStatus.QUEUED
+            )
+        )
+        or 0
+    )
 
 
 def list_jobs(session: Session, tenant_id: str, court_id: str, limit: int) -> Sequence[Job]:

@@ -25,6 +25,7 @@ const ADVICE = {
   mixed_media: "Send either photos or one clip, not both at once.",
   too_many_videos: "Send one clip at a time.",
   too_many_files: "Too many files at once. A handful of photos is enough.",
+  too_many_queued_jobs: "You have many calibrations waiting already. Upload again when some have finished.",
   corrupt_image: "A photo could not be read: it may be damaged. Export it again as PNG or JPEG.",
   corrupt_video: "The clip could not be read: it may be damaged or cut short. Export it again as MP4.",
   empty_file: "A file is empty. Pick the file again.",

@@ -247,3 +247,37 @@ def test_the_database_refuses_unknown_status_and_stage(engine, column: str) -> N
         conn.execute(text(f"UPDATE jobs SET {column} = 'paused' WHERE id = :id"), {"id": job_id})
     row = job_row(engine, job_id)
     assert (row.status, row.stage) == (JobStatus.QUEUED, JobStage.QUEUED)
+
+
+def test_claims_take_turns_across_tenants(engine) -> None:
+    """Tenant A queued three jobs before tenant B queued its three: workers alternate."""
+    _, a_ids = add_jobs(engine, 3)
+    _, b_ids = add_jobs(engine, 3)
+    claimed = [queue.claim(engine, f"w{i}", lease_s=60) for i in range(6)]
+    assert [job.id for job in claimed if job] == [
+        a_ids[0],
+        b_ids[0],
+        a_ids[1],
+        b_ids[1],
+        a_ids[2],
+        b_ids[2],
+    ]
+
+
+def test_a_tenant_with_nothing_running_goes_first(engine) -> None:
+    _, a_ids = add_jobs(engine, 4)
+    _, [b_id] = add_jobs(engine, 1)
+    claimed = [queue.claim(engine, f"w{i}", lease_s=60) for i in range(3)]
+    # B's one job does not wait behind A's four; then A and B have one running each: oldest first
+    assert [job.id for job in claimed if job] == [a_ids[0], b_id, a_ids[1]]
+
+
+def test_a_dead_workers_job_does_not_count_as_running(engine) -> None:
+    _, a_ids = add_jobs(engine, 2)
+    _, [b_id] = add_jobs(engine, 1)
+    now = utcnow()
+    assert queue.claim(engine, "dead", lease_s=10, now=now).id == a_ids[0]  # type: ignore[union-attr]
+    # its lease ran out: A has nothing running, like B, and A's job is the oldest claimable
+    later = now + timedelta(seconds=11)
+    assert queue.claim(engine, "w", lease_s=10, now=later).id == a_ids[0]  # type: ignore[union-attr]
+    assert queue.claim(engine, "w", lease_s=10, now=later).id == b_id  # type: ignore[union-attr]
