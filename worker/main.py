@@ -269,6 +269,8 @@ def process_job(
             image_width=int(result.image_size[0]),
             image_height=int(result.image_size[1]),
         )
+        # no renewals past here: one landing after the final write would report a lost lease
+        heartbeat.stop()
         queue.finish_success(engine, job, worker_id, calibration, _rounded(timings))
         cal_dir = None  # committed: keep the images
         log.info("job %s succeeded: calibration %s", job.id, calibration_id)
@@ -282,6 +284,7 @@ def process_job(
         log.warning("job %s: lease lost before the result was stored; discarded", job.id)
         return "lost"
     except Exception as exc:
+        heartbeat.stop()
         failure = classify(exc)
         if failure.log_traceback:
             log.error("job %s failed on attempt %d", job.id, job.attempt, exc_info=exc)

@@ -62,6 +62,14 @@ def retry_delay_s(attempt: int, base_s: float, max_s: float) -> float:
     return min(max_s, base_s * 2.0 ** max(0, attempt - 1))
 
 
+def _now_under_lock(session: Session, now: datetime | None) -> datetime:
+    """The time for a write, read once the transaction holds its lock. On SQLite, BEGIN IMMEDIATE
+    may wait seconds for other writers: a lease computed from a clock read before that wait could
+    be expired on arrival, and another worker would claim the job at once."""
+    session.connection()  # opens the transaction (BEGIN IMMEDIATE on SQLite), waiting if need be
+    return now or utcnow()
+
+
 def _running_jobs_of_the_same_tenant(now: datetime) -> Any:
     """For a candidate row of `jobs`: how many jobs its tenant has running (live leases only)."""
     busy = aliased(Job, name="busy")
@@ -83,8 +91,8 @@ def claim(
     """Atomically take a claimable job (queued and due, or running with an expired lease): the
     oldest of the tenant with the fewest running jobs, so that one tenant's pile of uploads does
     not hold back another tenant's single one."""
-    now = now or utcnow()
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
+        now = _now_under_lock(session, now)
         # A job whose worker died on its last attempt will never be retried: fail it with a reason.
         session.execute(
             update(Job)
@@ -164,20 +172,20 @@ def heartbeat(
     now: datetime | None = None,
 ) -> bool:
     """Renew the lease (and write progress). False when the job is no longer ours."""
-    now = now or utcnow()
-    values: dict[str, Any] = {
-        "lease_expires_at": now + timedelta(seconds=lease_s),
-        "heartbeat_at": now,
-        "updated_at": now,
-    }
-    if progress is not None:
-        values.update(
-            stage=progress.stage,
-            progress=min(1.0, max(0.0, float(progress.progress))),
-            generation=progress.generation,
-            best_fitness=progress.best_fitness,
-        )
-    with Session(engine) as session, session.begin():
+    with Session(write_engine(engine)) as session, session.begin():
+        now = _now_under_lock(session, now)
+        values: dict[str, Any] = {
+            "lease_expires_at": now + timedelta(seconds=lease_s),
+            "heartbeat_at": now,
+            "updated_at": now,
+        }
+        if progress is not None:
+            values.update(
+                stage=progress.stage,
+                progress=min(1.0, max(0.0, float(progress.progress))),
+                generation=progress.generation,
+                best_fitness=progress.best_fitness,
+            )
         result = session.execute(
             update(Job)
             .where(_owned_running(job_id, worker_id))
@@ -199,8 +207,8 @@ def finish_success(
     transaction. The court's camera only moves forward: an older upload finishing late does not
     replace the camera of a newer one. Raises LeaseLost (and stores nothing) if the job is not ours.
     """
-    now = now or utcnow()
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
+        now = _now_under_lock(session, now)
         result = session.execute(
             update(Job)
             .where(_owned_running(job.id, worker_id))
@@ -251,8 +259,8 @@ def finish_failure(
     """Record an error. Retryable errors requeue the job while attempts remain, claimable again
     `retry_delay_s` from now; returns the new status (queued or failed). Raises LeaseLost if the
     job is not ours."""
-    now = now or utcnow()
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
+        now = _now_under_lock(session, now)
         row = session.execute(
             select(Job.attempts, Job.max_attempts).where(_owned_running(job_id, worker_id))
         ).first()
@@ -288,8 +296,8 @@ def finish_failure(
 
 def release(engine: Engine, job_id: str, worker_id: str, now: datetime | None = None) -> bool:
     """Give a job back to the queue without counting the attempt (worker shutting down)."""
-    now = now or utcnow()
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
+        now = _now_under_lock(session, now)
         result = session.execute(
             update(Job)
             .where(_owned_running(job_id, worker_id))
