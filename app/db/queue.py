@@ -228,10 +228,13 @@ def finish_success(
         )
         if not result.rowcount:  # type: ignore[attr-defined]
             raise LeaseLost(f"job {job.id} is no longer running under worker {worker_id}")
-        session.add(calibration)
+        # Lock the court before inserting the calibration: the insert's foreign-key check takes a
+        # share lock on the court row, and two jobs of one court that both hold it and then ask
+        # for FOR UPDATE deadlock on PostgreSQL.
         court = session.scalars(
             select(Court).where(Court.id == job.court_id).with_for_update()
         ).one()
+        session.add(calibration)
         newer_than_active = True
         if court.active_calibration_id is not None:
             active_job_created = session.scalar(

@@ -281,3 +281,32 @@ def test_a_dead_workers_job_does_not_count_as_running(engine) -> None:
     later = now + timedelta(seconds=11)
     assert queue.claim(engine, "w", lease_s=10, now=later).id == a_ids[0]  # type: ignore[union-attr]
     assert queue.claim(engine, "w", lease_s=10, now=later).id == b_id  # type: ignore[union-attr]
+
+
+def test_jobs_of_one_court_finishing_together_do_not_deadlock(engine) -> None:
+    """Both transactions lock the court: they must queue on it, not deadlock (PostgreSQL)."""
+    _, job_ids = add_jobs(engine, 40)
+    errors: list[BaseException] = []
+
+    def finish(job: queue.ClaimedJob, worker_id: str, barrier: threading.Barrier) -> None:
+        barrier.wait()
+        try:
+            queue.finish_success(engine, job, worker_id, make_calibration(job), {})
+        except BaseException as exc:  # surfaced below
+            errors.append(exc)
+
+    for _ in range(20):
+        pair = [queue.claim(engine, f"w{i}", lease_s=60) for i in range(2)]
+        barrier = threading.Barrier(2)
+        threads = [
+            threading.Thread(target=finish, args=(job, f"w{i}", barrier))
+            for i, job in enumerate(pair)
+            if job is not None
+        ]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(30)
+    assert errors == []
+    with make_sessionmaker(engine)() as session:
+        assert len(session.scalars(select(Calibration)).all()) == 40
