@@ -21,10 +21,12 @@ import pytest
 import sqlalchemy as sa
 from sqlalchemy import select
 
+from app.db import repo
 from app.db.models import Calibration, Job, JobStatus
 from app.db.session import SQLITE_BEGIN_OPTION, make_engine, make_sessionmaker
+from app.main import create_app
 from app.settings import Settings
-from tests.service.conftest import POSTGRES_ADMIN_URL
+from tests.service.conftest import POSTGRES_ADMIN_URL, api_client
 from tests.service.test_queue import add_jobs
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -310,3 +312,27 @@ def test_workers_recover_by_themselves_when_the_database_comes_back(
     wait_until_all_finished(engine, len(job_ids), timeout_s=40)
     assert_each_job_succeeded_once_with_its_own_result(engine, job_ids, workers, exclusive=False)
     assert set(workers.stop_all().values()) == {0}
+
+
+def test_the_job_of_a_sigkilled_worker_shows_a_stale_heartbeat(
+    engine, workers_factory, any_db_settings: Settings
+) -> None:
+    [job_id] = queue_jobs(engine, n_tenants=1, per_tenant=1)
+    with make_sessionmaker(engine).begin() as session:
+        job = session.get(Job, job_id)
+        assert job is not None
+        _, key = repo.create_api_key(session, name="viewer", tenant_id=job.tenant_id)
+    auth = {"Authorization": f"Bearer {key}"}
+    workers = workers_factory(work_s=60)
+    worker = workers.start("w")
+    wait_for_event(workers, "start", timeout_s=40)
+    with api_client(create_app(any_db_settings)) as client:
+        alive = client.get(f"/jobs/{job_id}", headers=auth).json()
+        assert (alive["status"], alive["stale"]) == ("running", False)
+        worker.send_signal(signal.SIGKILL)
+        worker.wait(10)
+        killed_at = time.monotonic()
+        while not (body := client.get(f"/jobs/{job_id}", headers=auth).json())["stale"]:
+            assert time.monotonic() - killed_at < FAST_QUEUE["lease_s"] + 2, body
+            time.sleep(0.1)
+        assert body["status"] == "running" and body["heartbeat_at"] is not None
