@@ -25,8 +25,10 @@ from typing import Any
 import numpy as np
 
 FAKE_WORK_S = float(os.environ.get("SQUASHCAL_FAKE_WORK_S", "0.05"))
-# progress (where the worker notices an abort) at least every 0.1 s, and at least 5 times
-PROGRESS_STEPS = max(5, round(FAKE_WORK_S / 0.1))
+# progress (where the worker notices an abort) at least every 0.1 s, and at least 5 times; or,
+# with SQUASHCAL_FAKE_SILENT=1, none at all (a long numerical kernel that cannot be interrupted)
+SILENT = os.environ.get("SQUASHCAL_FAKE_SILENT") == "1"
+PROGRESS_STEPS = 1 if SILENT else max(5, round(FAKE_WORK_S / 0.1))
 
 
 @dataclass
@@ -73,7 +75,8 @@ class FakeCalibration:
         try:
             for step in range(PROGRESS_STEPS):
                 time.sleep(FAKE_WORK_S / PROGRESS_STEPS)
-                progress("optimising", (step + 1) / PROGRESS_STEPS, {})
+                if not SILENT:
+                    progress("optimising", (step + 1) / PROGRESS_STEPS, {})
         except BaseException as exc:
             self.event("aborted", job=self.job_id, reason=type(exc).__name__)
             raise

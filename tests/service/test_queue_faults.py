@@ -28,6 +28,7 @@ from app.main import create_app
 from app.settings import Settings
 from tests.service.conftest import POSTGRES_ADMIN_URL, api_client
 from tests.service.test_queue import add_jobs
+from worker.main import HARD_EXIT_AFTER_S
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -247,6 +248,23 @@ def test_sigterm_with_no_grace_gives_the_job_back_and_exits(engine, workers_fact
     worker.send_signal(signal.SIGTERM)
     assert worker.wait(10) == 0
     assert time.monotonic() - t0 < 5
+    job = job_row(engine, job_id)
+    assert (job.status, job.attempts, job.worker_id) == (JobStatus.QUEUED, 0, None)
+
+
+def test_sigterm_during_a_step_that_cannot_be_interrupted_still_exits_in_bounded_time(
+    engine, workers_factory
+) -> None:
+    """The calibration reports no progress (so it never sees the abort): the worker gives the job
+    back when the grace period ends and exits on its own HARD_EXIT_AFTER_S later."""
+    [job_id] = queue_jobs(engine, n_tenants=1, per_tenant=1)
+    workers = workers_factory(work_s=120, shutdown_grace_s=1, fake_silent=1)
+    worker = workers.start("w")
+    wait_for_event(workers, "start", timeout_s=40)
+    t0 = time.monotonic()
+    worker.send_signal(signal.SIGTERM)
+    assert worker.wait(HARD_EXIT_AFTER_S + 10) == 0
+    assert time.monotonic() - t0 < 1 + HARD_EXIT_AFTER_S + 5
     job = job_row(engine, job_id)
     assert (job.status, job.attempts, job.worker_id) == (JobStatus.QUEUED, 0, None)
 
