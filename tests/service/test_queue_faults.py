@@ -153,9 +153,10 @@ def wait_until_all_finished(engine: sa.Engine, n: int, timeout_s: float) -> None
 def assert_each_job_succeeded_once_with_its_own_result(
     engine: sa.Engine, job_ids: list[str], workers: Workers, exclusive: bool = True
 ) -> list[Job]:
-    """... and, if `exclusive`, no two live workers ever worked on one job at the same time (not
-    checked across a database outage: a worker cut off past its lease computes on until it can
-    learn that another worker has taken the job over, which the lease fencing allows)."""
+    """... and no job worked on by two live workers at once: strictly if `exclusive`; otherwise
+    a worker that stalled past its lease (a loaded machine, a database outage) may still be
+    computing when another claims the job, but it must then stop without storing anything (the
+    lease fencing: the one result stored is not the stalled worker's)."""
     with make_sessionmaker(engine)() as session:
         jobs = {j.id: j for j in session.scalars(select(Job))}
         calibrations = list(session.scalars(select(Calibration)))
@@ -170,8 +171,13 @@ def assert_each_job_succeeded_once_with_its_own_result(
         assert cal.result["job_id"] == job.id
         assert cal.genome[0] == job.params["seed"]  # the job's own input made this result
         assert 1 <= job.attempts <= job.max_attempts
+    events = workers.events()
+    doubles = [e for e in events if e["event"] == "double_hold"]
     if exclusive:
-        assert [e for e in workers.events() if e["event"] == "double_hold"] == []
+        assert doubles == []
+    stored_by = {cal.job_id: cal.result["worker_pid"] for cal in calibrations}
+    for double in doubles:
+        assert stored_by[double["job"]] != double["other_pid"], double
     return list(jobs.values())
 
 
@@ -213,7 +219,10 @@ def test_sigkilled_workers_are_restarted_and_every_job_still_succeeds(
         kills += 1
         workers.start(victim)
     wait_until_all_finished(engine, len(job_ids), timeout_s=deadline - time.monotonic())
-    jobs = assert_each_job_succeeded_once_with_its_own_result(engine, job_ids, workers)
+    # short leases on a loaded box: a worker may stall past one (then it must be fenced off)
+    jobs = assert_each_job_succeeded_once_with_its_own_result(
+        engine, job_ids, workers, exclusive=False
+    )
     # a killed worker's job was taken again: its attempts say so
     retried = [job for job in jobs if job.attempts > 1]
     assert retried, "no job was interrupted by the kills"
