@@ -8,9 +8,7 @@ from __future__ import annotations
 import argparse
 import os
 import signal
-import subprocess
 import sys
-import time
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
@@ -118,50 +116,44 @@ def _keys(settings: Settings, args: argparse.Namespace) -> int:
 
 
 def _run_all(settings: Settings, host: str | None, port: int | None, n_workers: int) -> int:
-    """Migrate, start `n_workers` worker processes and the API; stop them all on Ctrl-C/SIGTERM."""
+    """Migrate, start `n_workers` worker processes and the API, restart any that exits (with
+    backoff); stop them all on Ctrl-C/SIGTERM."""
+    from app.supervisor import Supervisor
+
     _migrate(settings)
     host = host or settings.host
     port = port or settings.port
-    workers = [
-        subprocess.Popen([sys.executable, "-m", "worker"], env=os.environ.copy())
-        for _ in range(max(0, n_workers))
-    ]
-    api = subprocess.Popen(
-        [sys.executable, "-m", "app.cli", "serve", "--host", host, "--port", str(port)],
+    children = {
+        "api": [sys.executable, "-m", "app.cli", "serve", "--host", host, "--port", str(port)]
+    }
+    for i in range(max(0, n_workers)):
+        children[f"worker-{i + 1}"] = [sys.executable, "-m", "worker"]
+    supervisor = Supervisor(
+        children,
         env=os.environ.copy(),
+        say=lambda message: print(f"squashcal run: {message}", flush=True),
     )
+
+    def _stop(signum: int, frame: object) -> None:
+        supervisor.stop()
+
+    signal.signal(signal.SIGTERM, _stop)
+    signal.signal(signal.SIGINT, _stop)
+    supervisor.start()
     shown_host = "127.0.0.1" if host in ("0.0.0.0", "::") else host
     print(
         f"\nsquashcal API on http://{shown_host}:{port}  (OpenAPI: /docs, upload page: /)\n"
-        f"{len(workers)} worker process(es) running; data in {settings.data_dir.resolve()}\n"
+        f"{n_workers} worker process(es) running; data in {settings.data_dir.resolve()}\n"
         "authenticate with an API key:  .venv/bin/squashcal keys create --name me\n"
         "  then send 'Authorization: Bearer <key>' (the last line that command prints)\n",
         flush=True,
     )
-    stopping = False
-
-    def _stop(signum: int, frame: object) -> None:
-        nonlocal stopping
-        stopping = True
-
-    signal.signal(signal.SIGTERM, _stop)
-    signal.signal(signal.SIGINT, _stop)
-    children = [api, *workers]
     try:
-        while not stopping and all(p.poll() is None for p in children):
-            time.sleep(0.5)
+        supervisor.run()
     finally:
-        for p in children:
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        deadline = time.monotonic() + settings.shutdown_grace_s + 10
-        for p in children:
-            try:
-                p.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                p.kill()
-    codes = [p.returncode for p in children]
-    return 0 if stopping else max(abs(c or 0) for c in codes) or 1
+        # workers get their grace period to finish or give back their jobs
+        supervisor.terminate_all(timeout_s=settings.shutdown_grace_s + 10)
+    return 0
 
 
 def _safe_url(url: str) -> str:

@@ -3,12 +3,20 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-JobStatus = Literal["queued", "running", "succeeded", "failed"]
-JobStage = Literal["queued", "background", "edges", "optimising", "refining", "storing", "done"]
+from app.db import models
+
+# The database's enums as Literals: the OpenAPI schema keeps its inline string enums and cannot
+# drift from what the jobs table's CHECK constraints allow.
+if TYPE_CHECKING:  # mypy cannot follow a computed Literal: it checks these as plain strings
+    JobStatus = str
+    JobStage = str
+else:
+    JobStatus = Literal[tuple(s.value for s in models.JobStatus)]
+    JobStage = Literal[tuple(s.value for s in models.JobStage)]
 # (u, v) pixels or (x, y) floor metres; JSON has no NaN/Infinity, and Python's "NaN" tokens are refused
 FinitePair = tuple[float, float]
 
@@ -63,6 +71,13 @@ class JobOut(BaseModel):
     best_fitness: float | None
     attempts: int
     max_attempts: int
+    heartbeat_at: datetime | None = Field(
+        description="when the worker running the job last renewed its lease (null if never run)"
+    )
+    stale: bool = Field(
+        description="running, but its worker has not renewed the lease in time (it has probably "
+        "died): the job goes back to the queue and is retried while attempts remain"
+    )
     media_kind: Literal["images", "video"]
     n_files: int
     error: JobError | None

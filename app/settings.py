@@ -32,12 +32,21 @@ class Settings(BaseSettings):
     # Background: frames sampled from a clip, spread over its whole length
     background_frames: int = Field(default=15, ge=1, le=200)
 
-    # Queue and worker
+    # Queue and worker. A short lease renewed often: a dead worker's job is visibly stale (and
+    # claimable again) within seconds, while a few missed renewals (a slow database) are tolerated.
     max_attempts: int = Field(default=3, ge=1)
-    lease_s: float = Field(default=60.0, gt=0)
+    lease_s: float = Field(default=10.0, gt=0)
+    heartbeat_s: float = Field(default=2.0, gt=0)
     poll_interval_s: float = Field(default=1.0, gt=0)
     progress_interval_s: float = Field(default=0.3, gt=0)
     shutdown_grace_s: float = Field(default=30.0, ge=0)
+    # a retryable failure waits retry_backoff_s, then twice that, ... (at most retry_backoff_max_s)
+    retry_backoff_s: float = Field(default=5.0, ge=0)
+    retry_backoff_max_s: float = Field(default=300.0, ge=0)
+    # A tenant with this many jobs waiting gets 429 (Retry-After: queue_full_retry_after_s) for
+    # more uploads: one tenant cannot fill the queue (or the disk) for everyone.
+    max_queued_jobs_per_tenant: int = Field(default=50, ge=1)
+    queue_full_retry_after_s: int = Field(default=30, ge=1)
 
     # Calibration run (None = the pipeline's own defaults)
     ga_time_budget_s: float | None = Field(default=None, gt=0)
@@ -49,9 +58,11 @@ class Settings(BaseSettings):
     auth_cache_s: float = Field(default=30.0, ge=0)
 
     @model_validator(mode="after")
-    def _lease_outlives_progress(self) -> Settings:
+    def _lease_outlives_heartbeats(self) -> Settings:
         if self.progress_interval_s * 2 >= self.lease_s:
             raise ValueError("lease_s must be more than twice progress_interval_s")
+        if self.heartbeat_s * 3 > self.lease_s:
+            raise ValueError("lease_s must be at least three heartbeat_s (two renewals may fail)")
         return self
 
     @property

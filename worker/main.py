@@ -1,9 +1,14 @@
 """The worker process: claim a job, run the calibration, store the result; repeat.
 
-Leases: a heartbeat thread renews the job's lease (and writes progress, at most every
-`progress_interval_s`) while the main thread computes. If the lease is lost (the worker stalled
-past it and another worker took the job) the result is discarded. SIGTERM/SIGINT: stop claiming,
-let the current job finish within `shutdown_grace_s`, otherwise give it back to the queue.
+Leases: a heartbeat thread renews the job's lease at least every `heartbeat_s` (and writes
+progress, at most every `progress_interval_s`) while the main thread computes. If the lease is lost
+(the worker stalled past it and another worker took the job) the result is discarded.
+SIGTERM/SIGINT: stop claiming, let the current job finish within `shutdown_grace_s`, otherwise give
+it back to the queue.
+
+The database may be away for a while: every write the worker makes is retried or left to the lease
+(an unrecorded job is reclaimed when its lease runs out), and nothing that goes wrong with one job
+ends the process.
 """
 
 from __future__ import annotations
@@ -16,8 +21,9 @@ import socket
 import threading
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import cv2
 import numpy as np
@@ -25,24 +31,29 @@ from sqlalchemy import Engine
 
 from app.calib.background import ClipError, background_from_clip, background_from_frames
 from app.db import media, queue
-from app.db.models import Calibration, new_id
+from app.db.models import Calibration, JobStage, new_id
 from app.db.session import make_engine
 from app.settings import Settings
+from worker.errors import Failure, classify
 from worker.media import MediaError, load_frames
 
 log = logging.getLogger("squashcal.worker")
+T = TypeVar("T")
 
 # Overall job progress at the start of each stage; the stage's own fraction fills its span.
-STAGE_SPANS: dict[str, tuple[float, float]] = {
-    "background": (0.0, 0.05),
-    "edges": (0.05, 0.1),
-    "optimising": (0.1, 0.9),
-    "refining": (0.9, 0.95),
-    "storing": (0.95, 1.0),
+STAGE_SPANS: dict[JobStage, tuple[float, float]] = {
+    JobStage.BACKGROUND: (0.0, 0.05),
+    JobStage.EDGES: (0.05, 0.1),
+    JobStage.OPTIMISING: (0.1, 0.9),
+    JobStage.REFINING: (0.9, 0.95),
+    JobStage.STORING: (0.95, 1.0),
 }
 # After the grace period, the main thread gets this long to notice the abort before the process
 # gives the job back and exits on its own.
 HARD_EXIT_AFTER_S = 10.0
+# Waits between tries of a database write that failed (doubling up to the last).
+DB_RETRY_FIRST_S = 0.2
+DB_RETRY_MAX_S = 5.0
 
 
 class JobAborted(Exception):
@@ -78,10 +89,11 @@ class Heartbeat(threading.Thread):
         self.job = job
         self.worker_id = worker_id
         self.lease_s = settings.lease_s
-        self.interval_s = settings.progress_interval_s
+        self.heartbeat_s = settings.heartbeat_s
+        self.interval_s = min(settings.progress_interval_s, settings.heartbeat_s)
         self.shutdown = shutdown
         self._lock = threading.Lock()
-        self._latest = queue.Progress(stage="background", progress=0.0)
+        self._latest = queue.Progress(stage=JobStage.BACKGROUND, progress=0.0)
         self._dirty = True
         self._stop_event = threading.Event()
         self.abort_reason: str | None = None  # "lease_lost" | "shutdown"
@@ -90,7 +102,7 @@ class Heartbeat(threading.Thread):
     # -- called from the main thread
     def report(
         self,
-        stage: str,
+        stage: JobStage,
         fraction: float,
         generation: int | None = None,
         best_fitness: float | None = None,
@@ -109,10 +121,14 @@ class Heartbeat(threading.Thread):
         self.check()
 
     def pipeline_progress(self, stage: str, fraction: float, info: dict[str, Any]) -> None:
+        try:
+            job_stage = JobStage(stage)
+        except ValueError:  # a pipeline stage the jobs table does not know: keep the last one
+            job_stage = self._latest.stage
         generation = info.get("generation")
         best = info.get("best_fitness")
         self.report(
-            stage,
+            job_stage,
             fraction,
             int(generation) if generation is not None else None,
             float(best) if best is not None and np.isfinite(best) else None,
@@ -137,15 +153,14 @@ class Heartbeat(threading.Thread):
                 and self.abort_reason is None
             ):
                 self.abort_reason = "shutdown"
-                self.released = queue.release(self.engine, self.job.id, self.worker_id)
-                log.warning("job %s given back to the queue (shutdown grace over)", self.job.id)
+                self.released = release_job(self.engine, self.job.id, self.worker_id)
                 threading.Thread(target=self._hard_exit, daemon=True).start()
                 return
             with self._lock:
                 dirty = self._dirty
                 latest = self._latest
                 self._dirty = False
-            if not dirty and now - last_write < self.lease_s / 3:
+            if not dirty and now - last_write < self.heartbeat_s:
                 continue
             try:
                 ours = queue.heartbeat(
@@ -194,13 +209,13 @@ def process_job(
     t_start = time.perf_counter()
     cal_dir = None
     try:
-        heartbeat.report("background", 0.0)
+        heartbeat.report(JobStage.BACKGROUND, 0.0)
         t0 = time.perf_counter()
         background, moving_mask, background_info = _background(settings, job)
         timings["background"] = time.perf_counter() - t0
         for stage, seconds in background_info.get("timings_s", {}).items():
             timings[f"background.{stage}"] = float(seconds)
-        heartbeat.report("background", 1.0)
+        heartbeat.report(JobStage.BACKGROUND, 1.0)
 
         kwargs: dict[str, Any] = {"seed": int(job.params.get("seed") or 0), "spec": job.spec}
         if job.params.get("start_genome") is not None:
@@ -223,7 +238,7 @@ def process_job(
         for stage, seconds in result.timings_s.items():
             timings[f"calibrate.{stage}"] = float(seconds)
 
-        heartbeat.report("storing", 0.0)
+        heartbeat.report(JobStage.STORING, 0.0)
         t0 = time.perf_counter()
         calibration_id = new_id()
         cal_dir = media.calibration_dir(settings, calibration_id)
@@ -254,28 +269,26 @@ def process_job(
             image_width=int(result.image_size[0]),
             image_height=int(result.image_size[1]),
         )
+        # no renewals past here: one landing after the final write would report a lost lease
+        heartbeat.stop()
         queue.finish_success(engine, job, worker_id, calibration, _rounded(timings))
         cal_dir = None  # committed: keep the images
         log.info("job %s succeeded: calibration %s", job.id, calibration_id)
         return "succeeded"
     except JobAborted as exc:
         if str(exc) == "shutdown" and not heartbeat.released:
-            heartbeat.released = queue.release(engine, job.id, worker_id)
+            heartbeat.released = release_job(engine, job.id, worker_id)
         log.warning("job %s stopped: %s", job.id, exc)
         return "released" if str(exc) == "shutdown" else "lost"
     except queue.LeaseLost:
         log.warning("job %s: lease lost before the result was stored; discarded", job.id)
         return "lost"
-    except pipeline.CourtNotFound as exc:
-        return _fail(engine, job, worker_id, "court_not_found", str(exc), False, timings, t_start)
-    except MediaError as exc:
-        return _fail(engine, job, worker_id, exc.code, exc.message, False, timings, t_start)
-    except ValueError as exc:
-        return _fail(engine, job, worker_id, "invalid_input", str(exc), False, timings, t_start)
     except Exception as exc:
-        log.exception("job %s failed on attempt %d", job.id, job.attempt)
-        message = f"{type(exc).__name__}: {exc}"
-        return _fail(engine, job, worker_id, "calibration_error", message, True, timings, t_start)
+        heartbeat.stop()
+        failure = classify(exc)
+        if failure.log_traceback:
+            log.error("job %s failed on attempt %d", job.id, job.attempt, exc_info=exc)
+        return _fail(engine, settings, job, worker_id, failure, timings, t_start)
     finally:
         heartbeat.stop()
         if cal_dir is not None:  # not committed: leave no orphaned images behind
@@ -315,23 +328,83 @@ def _rounded(timings: dict[str, float]) -> dict[str, float]:
 
 def _fail(
     engine: Engine,
+    settings: Settings,
     job: queue.ClaimedJob,
     worker_id: str,
-    code: str,
-    message: str,
-    retryable: bool,
+    failure: Failure,
     timings: dict[str, float],
     t_start: float,
 ) -> str:
+    """Record the failure (retried while the database is away). Returns the job's new status, or
+    "lost" (another worker owns it now) or "unrecorded" (gave up: the lease will expire and the
+    job be claimed again)."""
     timings["total"] = time.perf_counter() - t_start
+    delay_s = queue.retry_delay_s(
+        job.attempt, settings.retry_backoff_s, settings.retry_backoff_max_s
+    )
     try:
-        status = queue.finish_failure(
-            engine, job.id, worker_id, code, message, retryable, _rounded(timings)
+        status = retry_db_write(
+            lambda: queue.finish_failure(
+                engine,
+                job.id,
+                worker_id,
+                failure.code,
+                failure.message,
+                failure.retryable,
+                _rounded(timings),
+                retry_delay_s=delay_s,
+            ),
+            f"recording the failure of job {job.id}",
+            # past the lease another worker may claim the job: our record would be refused anyway
+            give_up_after_s=settings.lease_s,
         )
     except queue.LeaseLost:
         return "lost"
-    log.warning("job %s: %s (%s): %s", job.id, status, code, message)
+    except Exception:
+        log.error(
+            "job %s: could not record its failure; it is retried when its lease expires", job.id
+        )
+        return "unrecorded"
+    log.warning("job %s: %s (%s): %s", job.id, status, failure.code, failure.message)
     return status
+
+
+def retry_db_write(write: Callable[[], T], what: str, give_up_after_s: float) -> T:
+    """`write()`, tried again with growing waits while it raises anything but LeaseLost, until
+    `give_up_after_s` have passed (then the last error is raised)."""
+    deadline = time.monotonic() + give_up_after_s
+    wait_s = DB_RETRY_FIRST_S
+    while True:
+        try:
+            return write()
+        except queue.LeaseLost:
+            raise
+        except Exception as exc:
+            if time.monotonic() + wait_s > deadline:
+                raise
+            log.warning(
+                "%s failed (%s: %s); retrying in %.1f s", what, type(exc).__name__, exc, wait_s
+            )
+        time.sleep(wait_s)
+        wait_s = min(2 * wait_s, DB_RETRY_MAX_S)
+
+
+def release_job(engine: Engine, job_id: str, worker_id: str) -> bool:
+    """Give the job back to the queue; on a database error leave it to the lease (False)."""
+    try:
+        released = retry_db_write(
+            lambda: queue.release(engine, job_id, worker_id),
+            f"releasing job {job_id}",
+            give_up_after_s=2.0,  # shutting down: do not hold the exit for long
+        )
+    except Exception:
+        log.exception(
+            "job %s: could not give it back; it is claimable when its lease expires", job_id
+        )
+        return False
+    if released:
+        log.warning("job %s given back to the queue", job_id)
+    return released
 
 
 def default_worker_id() -> str:
@@ -365,7 +438,10 @@ def run_worker(settings: Settings, once: bool = False, worker_id: str | None = N
                 shutdown.requested.wait(settings.poll_interval_s)
                 continue
             log.info("job %s claimed (attempt %d/%d)", job.id, job.attempt, job.max_attempts)
-            process_job(engine, settings, job, worker_id, shutdown)
+            try:
+                process_job(engine, settings, job, worker_id, shutdown)
+            except Exception:  # a bug in the bookkeeping: the lease brings the job back
+                log.exception("job %s: the worker failed around it; going on", job.id)
             if once:
                 return 0
     finally:

@@ -6,6 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter, Request
 from fastapi.responses import FileResponse, JSONResponse
+from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
 from app.api import uploads
@@ -15,6 +16,7 @@ from app.api.serialize import calibration_out
 from app.db import media, repo
 from app.db.models import Calibration, Court, new_id
 from app.schemas import CalibrationOut, ErrorResponse, JobAccepted
+from app.settings import Settings
 
 router = APIRouter(tags=["calibrations"])
 
@@ -47,8 +49,20 @@ _UPLOAD_FORM: dict[str, Any] = {
     }
 }
 _ERRORS: dict[int | str, dict[str, Any]] = {
-    code: {"model": ErrorResponse} for code in (401, 404, 413, 415, 422)
+    code: {"model": ErrorResponse} for code in (401, 404, 413, 415, 422, 429)
 }
+
+
+def _refuse_if_queue_full(session: Session, tenant_id: str, settings: Settings) -> None:
+    """429 while the tenant already has its share of waiting jobs."""
+    if repo.count_queued_jobs(session, tenant_id) >= settings.max_queued_jobs_per_tenant:
+        raise ApiError(
+            429,
+            "too_many_queued_jobs",
+            f"{settings.max_queued_jobs_per_tenant} of your calibrations are already waiting; "
+            "upload again when some have run",
+            headers={"Retry-After": str(settings.queue_full_retry_after_s)},
+        )
 
 
 @router.post(
@@ -64,11 +78,14 @@ async def upload_calibration(
     """Store the upload, queue a calibration job and answer at once (202 + Location)."""
     settings = state.settings
 
-    def owned_court() -> Court:
+    def owned_court_with_room_in_the_queue() -> Court:
         with state.sessions() as session:
-            return repo.get_owned(session, Court, tenant_id, court_id)
+            court = repo.get_owned(session, Court, tenant_id, court_id)
+            _refuse_if_queue_full(session, tenant_id, settings)
+            return court
 
-    await run_in_threadpool(owned_court)  # 404 before reading a byte of the body
+    # 404 or 429 before reading a byte of the body
+    await run_in_threadpool(owned_court_with_room_in_the_queue)
     job_id = new_id()
     target = media.job_dir(settings, job_id)
     target.mkdir(parents=True)
@@ -81,6 +98,7 @@ async def upload_calibration(
 
         def commit_job() -> None:
             with state.sessions.begin() as session:
+                _refuse_if_queue_full(session, tenant_id, settings)  # others came in meanwhile
                 repo.new_job(
                     session,
                     job_id=job_id,

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from datetime import datetime
+
 import numpy as np
 
-from app.db.models import Calibration, Court, Job
+from app.db.models import Calibration, Court, Job, JobStatus, utcnow
 from app.schemas import (
     CalibrationOut,
     CameraPose,
@@ -27,20 +29,28 @@ def court_out(court: Court) -> CourtOut:
     )
 
 
-def job_out(job: Job) -> JobOut:
+def job_out(job: Job, now: datetime | None = None) -> JobOut:
+    now = now or utcnow()
+    stale = (
+        job.status == JobStatus.RUNNING
+        and job.lease_expires_at is not None
+        and job.lease_expires_at < now
+    )
     error = None
-    if job.status == "failed" and job.error_code is not None:
+    if job.status == JobStatus.FAILED and job.error_code is not None:
         error = JobError(code=job.error_code, message=job.error_message or "")
     return JobOut(
         id=job.id,
         court_id=job.court_id,
-        status=job.status,  # type: ignore[arg-type]
-        stage=job.stage,  # type: ignore[arg-type]
+        status=job.status.value,
+        stage=job.stage.value,
         progress=job.progress,
         generation=job.generation,
         best_fitness=job.best_fitness,
         attempts=job.attempts,
         max_attempts=job.max_attempts,
+        heartbeat_at=job.heartbeat_at,
+        stale=stale,
         media_kind=job.media_kind,  # type: ignore[arg-type]
         n_files=len(job.media_files),
         error=error,

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import uuid
 from datetime import UTC, datetime
+from enum import StrEnum
 from typing import Any
 
 from sqlalchemy import (
     JSON,
     DateTime,
+    Enum,
     Float,
     ForeignKey,
     Index,
@@ -30,8 +32,40 @@ NAMING_CONVENTION = {
     "pk": "pk_%(table_name)s",
 }
 
-JOB_STATUSES = ("queued", "running", "succeeded", "failed")
-JOB_STAGES = ("queued", "background", "edges", "optimising", "refining", "storing", "done")
+
+class JobStatus(StrEnum):
+    """Where a job is in the queue; the values are what the database and the API show."""
+
+    QUEUED = "queued"
+    RUNNING = "running"
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+
+
+class JobStage(StrEnum):
+    """What a job is doing (the worker's stages, in order)."""
+
+    QUEUED = "queued"
+    BACKGROUND = "background"
+    EDGES = "edges"
+    OPTIMISING = "optimising"
+    REFINING = "refining"
+    STORING = "storing"
+    DONE = "done"
+
+
+def _string_enum(enum: type[StrEnum], name: str) -> Enum:
+    """A VARCHAR holding the enum's values, guarded by a CHECK constraint named `name` (the same
+    on SQLite and PostgreSQL: no native enum type, so adding a value is a plain migration)."""
+    return Enum(
+        enum,
+        name=name,
+        native_enum=False,
+        create_constraint=True,
+        length=16,
+        validate_strings=True,
+        values_callable=lambda members: [m.value for m in members],
+    )
 
 
 def new_id() -> str:
@@ -110,8 +144,12 @@ class Job(Base):
     id: Mapped[str] = mapped_column(String(32), primary_key=True, default=new_id)
     tenant_id: Mapped[str] = mapped_column(ForeignKey("tenants.id", ondelete="CASCADE"), index=True)
     court_id: Mapped[str] = mapped_column(ForeignKey("courts.id", ondelete="CASCADE"), index=True)
-    status: Mapped[str] = mapped_column(String(16), default="queued")
-    stage: Mapped[str] = mapped_column(String(16), default="queued")
+    status: Mapped[JobStatus] = mapped_column(
+        _string_enum(JobStatus, "status"), default=JobStatus.QUEUED
+    )
+    stage: Mapped[JobStage] = mapped_column(
+        _string_enum(JobStage, "stage"), default=JobStage.QUEUED
+    )
     progress: Mapped[float] = mapped_column(Float, default=0.0)
     generation: Mapped[int | None] = mapped_column(Integer, default=None)
     best_fitness: Mapped[float | None] = mapped_column(Float, default=None)
@@ -119,6 +157,10 @@ class Job(Base):
     max_attempts: Mapped[int] = mapped_column(Integer, default=3)
     worker_id: Mapped[str | None] = mapped_column(String(200), default=None)
     lease_expires_at: Mapped[datetime | None] = mapped_column(default=None)
+    # the running worker's last sign of life (claim or lease renewal)
+    heartbeat_at: Mapped[datetime | None] = mapped_column(default=None)
+    # a queued job waits until then (retry backoff); None = at once
+    run_after: Mapped[datetime | None] = mapped_column(default=None)
     # what was uploaded: "images" or "video", files in media/jobs/<id>/
     media_kind: Mapped[str] = mapped_column(String(16))
     media_files: Mapped[list[str]] = mapped_column(JSON)

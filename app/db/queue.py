@@ -2,7 +2,9 @@
 
 Every state change updates only rows in the state it expects (status and owning worker), so a worker
 whose lease expired and whose job was re-claimed elsewhere cannot overwrite the new owner's work.
-Claims are atomic: on SQLite the transaction starts with BEGIN IMMEDIATE (one writer at a time, so
+Claims are fair across tenants: the next job is the oldest of the tenant with the fewest running
+jobs. On PostgreSQL two workers claiming at the same instant may both count the same running jobs,
+so fairness is approximate there; exclusivity is not. Claims are atomic: on SQLite the transaction starts with BEGIN IMMEDIATE (one writer at a time, so
 the select-then-update inside one UPDATE statement cannot race); on PostgreSQL the candidate row is
 locked with FOR UPDATE SKIP LOCKED so concurrent workers pick different jobs without waiting.
 """
@@ -13,10 +15,10 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta
 from typing import Any
 
-from sqlalchemy import Engine, or_, select, update
-from sqlalchemy.orm import Session
+from sqlalchemy import Engine, func, or_, select, update
+from sqlalchemy.orm import Session, aliased
 
-from app.db.models import Calibration, Court, Job, utcnow
+from app.db.models import Calibration, Court, Job, JobStage, JobStatus, utcnow
 from app.db.session import write_engine
 
 
@@ -40,28 +42,64 @@ class ClaimedJob:
 
 @dataclass
 class Progress:
-    stage: str
+    stage: JobStage
     progress: float
     generation: int | None = None
     best_fitness: float | None = None
 
 
 def _expired(now: datetime) -> Any:
-    return (Job.status == "running") & (Job.lease_expires_at < now)
+    return (Job.status == JobStatus.RUNNING) & (Job.lease_expires_at < now)
+
+
+def _due(now: datetime) -> Any:
+    """Queued and past its retry backoff."""
+    return (Job.status == JobStatus.QUEUED) & (Job.run_after.is_(None) | (Job.run_after <= now))
+
+
+def retry_delay_s(attempt: int, base_s: float, max_s: float) -> float:
+    """Backoff before attempt `attempt + 1` after attempt `attempt` failed: base, 2 x base, ..."""
+    return min(max_s, base_s * 2.0 ** max(0, attempt - 1))
+
+
+def _now_under_lock(session: Session, now: datetime | None) -> datetime:
+    """The time for a write, read once the transaction holds its lock. On SQLite, BEGIN IMMEDIATE
+    may wait seconds for other writers: a lease computed from a clock read before that wait could
+    be expired on arrival, and another worker would claim the job at once."""
+    session.connection()  # opens the transaction (BEGIN IMMEDIATE on SQLite), waiting if need be
+    return now or utcnow()
+
+
+def _running_jobs_of_the_same_tenant(now: datetime) -> Any:
+    """For a candidate row of `jobs`: how many jobs its tenant has running (live leases only)."""
+    busy = aliased(Job, name="busy")
+    return (
+        select(func.count(busy.id))
+        .where(
+            busy.tenant_id == Job.tenant_id,
+            busy.status == JobStatus.RUNNING,
+            busy.lease_expires_at >= now,
+        )
+        .correlate(Job)
+        .scalar_subquery()
+    )
 
 
 def claim(
     engine: Engine, worker_id: str, lease_s: float, now: datetime | None = None
 ) -> ClaimedJob | None:
-    """Atomically take the oldest claimable job (queued, or running with an expired lease)."""
-    now = now or utcnow()
+    """Atomically take a claimable job (queued and due, or running with an expired lease): the
+    oldest of the tenant with the fewest running jobs, so that one tenant's pile of uploads does
+    not hold back another tenant's single one."""
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
+        now = _now_under_lock(session, now)
         # A job whose worker died on its last attempt will never be retried: fail it with a reason.
         session.execute(
             update(Job)
             .where(_expired(now), Job.attempts >= Job.max_attempts)
             .values(
-                status="failed",
+                status=JobStatus.FAILED,
+                stage=JobStage.DONE,
                 error_code="worker_lost",
                 error_message=(
                     "the worker running this job stopped responding (lease expired) and the job "
@@ -76,8 +114,8 @@ def claim(
         )
         candidate = (
             select(Job.id)
-            .where(or_(Job.status == "queued", _expired(now)), Job.attempts < Job.max_attempts)
-            .order_by(Job.created_at, Job.id)
+            .where(or_(_due(now), _expired(now)), Job.attempts < Job.max_attempts)
+            .order_by(_running_jobs_of_the_same_tenant(now), Job.created_at, Job.id)
             .limit(1)
             .with_for_update(skip_locked=True)
             .scalar_subquery()
@@ -86,14 +124,16 @@ def claim(
             update(Job)
             .where(Job.id == candidate)
             .values(
-                status="running",
-                stage="background",
+                status=JobStatus.RUNNING,
+                stage=JobStage.BACKGROUND,
                 progress=0.0,
                 generation=None,
                 best_fitness=None,
                 attempts=Job.attempts + 1,
                 worker_id=worker_id,
                 lease_expires_at=now + timedelta(seconds=lease_s),
+                heartbeat_at=now,
+                run_after=None,
                 started_at=now,
                 updated_at=now,
             )
@@ -120,7 +160,7 @@ def claim(
 
 
 def _owned_running(job_id: str, worker_id: str) -> Any:
-    return (Job.id == job_id) & (Job.status == "running") & (Job.worker_id == worker_id)
+    return (Job.id == job_id) & (Job.status == JobStatus.RUNNING) & (Job.worker_id == worker_id)
 
 
 def heartbeat(
@@ -132,19 +172,20 @@ def heartbeat(
     now: datetime | None = None,
 ) -> bool:
     """Renew the lease (and write progress). False when the job is no longer ours."""
-    now = now or utcnow()
-    values: dict[str, Any] = {
-        "lease_expires_at": now + timedelta(seconds=lease_s),
-        "updated_at": now,
-    }
-    if progress is not None:
-        values.update(
-            stage=progress.stage,
-            progress=min(1.0, max(0.0, float(progress.progress))),
-            generation=progress.generation,
-            best_fitness=progress.best_fitness,
-        )
-    with Session(engine) as session, session.begin():
+    with Session(write_engine(engine)) as session, session.begin():
+        now = _now_under_lock(session, now)
+        values: dict[str, Any] = {
+            "lease_expires_at": now + timedelta(seconds=lease_s),
+            "heartbeat_at": now,
+            "updated_at": now,
+        }
+        if progress is not None:
+            values.update(
+                stage=progress.stage,
+                progress=min(1.0, max(0.0, float(progress.progress))),
+                generation=progress.generation,
+                best_fitness=progress.best_fitness,
+            )
         result = session.execute(
             update(Job)
             .where(_owned_running(job_id, worker_id))
@@ -166,14 +207,14 @@ def finish_success(
     transaction. The court's camera only moves forward: an older upload finishing late does not
     replace the camera of a newer one. Raises LeaseLost (and stores nothing) if the job is not ours.
     """
-    now = now or utcnow()
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
+        now = _now_under_lock(session, now)
         result = session.execute(
             update(Job)
             .where(_owned_running(job.id, worker_id))
             .values(
-                status="succeeded",
-                stage="done",
+                status=JobStatus.SUCCEEDED,
+                stage=JobStage.DONE,
                 progress=1.0,
                 calibration_id=calibration.id,
                 error_code=None,
@@ -187,10 +228,13 @@ def finish_success(
         )
         if not result.rowcount:  # type: ignore[attr-defined]
             raise LeaseLost(f"job {job.id} is no longer running under worker {worker_id}")
-        session.add(calibration)
+        # Lock the court before inserting the calibration: the insert's foreign-key check takes a
+        # share lock on the court row, and two jobs of one court that both hold it and then ask
+        # for FOR UPDATE deadlock on PostgreSQL.
         court = session.scalars(
             select(Court).where(Court.id == job.court_id).with_for_update()
         ).one()
+        session.add(calibration)
         newer_than_active = True
         if court.active_calibration_id is not None:
             active_job_created = session.scalar(
@@ -213,28 +257,32 @@ def finish_failure(
     retryable: bool,
     timings: dict[str, float] | None = None,
     now: datetime | None = None,
-) -> str:
-    """Record an error. Retryable errors requeue the job while attempts remain; returns the new
-    status ("queued" or "failed"). Raises LeaseLost if the job is not ours."""
-    now = now or utcnow()
+    retry_delay_s: float = 0.0,
+) -> JobStatus:
+    """Record an error. Retryable errors requeue the job while attempts remain, claimable again
+    `retry_delay_s` from now; returns the new status (queued or failed). Raises LeaseLost if the
+    job is not ours."""
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
+        now = _now_under_lock(session, now)
         row = session.execute(
             select(Job.attempts, Job.max_attempts).where(_owned_running(job_id, worker_id))
         ).first()
         if row is None:
             raise LeaseLost(f"job {job_id} is no longer running under worker {worker_id}")
         attempts, max_attempts = row
-        status = "queued" if retryable and attempts < max_attempts else "failed"
+        requeue = retryable and attempts < max_attempts
+        status = JobStatus.QUEUED if requeue else JobStatus.FAILED
         values: dict[str, Any] = {
             "status": status,
-            "stage": "queued" if status == "queued" else "done",
+            "stage": JobStage.QUEUED if requeue else JobStage.DONE,
             "error_code": code,
             "error_message": message,
             "worker_id": None,
             "lease_expires_at": None,
+            "run_after": now + timedelta(seconds=retry_delay_s) if requeue else None,
             "updated_at": now,
         }
-        if status == "failed":
+        if not requeue:
             values["finished_at"] = now
         if timings is not None:
             values["timings"] = timings
@@ -251,14 +299,14 @@ def finish_failure(
 
 def release(engine: Engine, job_id: str, worker_id: str, now: datetime | None = None) -> bool:
     """Give a job back to the queue without counting the attempt (worker shutting down)."""
-    now = now or utcnow()
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
+        now = _now_under_lock(session, now)
         result = session.execute(
             update(Job)
             .where(_owned_running(job_id, worker_id))
             .values(
-                status="queued",
-                stage="queued",
+                status=JobStatus.QUEUED,
+                stage=JobStage.QUEUED,
                 attempts=Job.attempts - 1,
                 worker_id=None,
                 lease_expires_at=None,

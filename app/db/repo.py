@@ -9,10 +9,10 @@ import secrets
 from collections.abc import Sequence
 from typing import Any, TypeVar
 
-from sqlalchemy import select, update
+from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
-from app.db.models import ApiKey, Calibration, Court, Job, Tenant, utcnow
+from app.db.models import ApiKey, Calibration, Court, Job, JobStage, JobStatus, Tenant, utcnow
 
 KEY_PREFIX = "sqc_"
 
@@ -133,13 +133,24 @@ def new_job(
         media_files=media_files,
         params=params,
         max_attempts=max_attempts,
-        status="queued",
-        stage="queued",
+        status=JobStatus.QUEUED,
+        stage=JobStage.QUEUED,
         timings={},
     )
     session.add(job)
     session.flush()
     return job
+
+
+def count_queued_jobs(session: Session, tenant_id: str) -> int:
+    return int(
+        session.scalar(
+            select(func.count(Job.id)).where(
+                Job.tenant_id == tenant_id, Job.status == JobStatus.QUEUED
+            )
+        )
+        or 0
+    )
 
 
 def list_jobs(session: Session, tenant_id: str, court_id: str, limit: int) -> Sequence[Job]:

@@ -25,6 +25,7 @@ const ADVICE = {
   mixed_media: "Send either photos or one clip, not both at once.",
   too_many_videos: "Send one clip at a time.",
   too_many_files: "Too many files at once. A handful of photos is enough.",
+  too_many_queued_jobs: "You have many calibrations waiting already. Upload again when some have finished.",
   corrupt_image: "A photo could not be read: it may be damaged. Export it again as PNG or JPEG.",
   corrupt_video: "The clip could not be read: it may be damaged or cut short. Export it again as MP4.",
   empty_file: "A file is empty. Pick the file again.",
@@ -38,6 +39,10 @@ const ADVICE = {
   court_not_found: "We could not find the court's lines. Re-film with the camera still, the whole floor and the front wall in view, the lights on and the lens clean.",
   worker_lost: "The calibration stopped half way on our side. Upload the same footage again.",
   calibration_error: "Something went wrong on our side while calibrating. Try again; if it keeps failing, tell your service operator.",
+  internal_error: "Something went wrong on our side while calibrating. Try again; if it keeps failing, tell your service operator.",
+  database_error: "Our database was briefly unavailable. The calibration is retried by itself.",
+  storage_error: "Our storage failed while calibrating. The calibration is retried by itself.",
+  out_of_memory: "The calibration ran out of memory on our side. Try fewer or smaller photos.",
   invalid_input: "The footage could not be used. Send a clip or photos of a squash court.",
   unauthorized: "The API key was not accepted. Check it, or ask for a new one.",
 };

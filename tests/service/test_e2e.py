@@ -192,7 +192,7 @@ def test_clip_upload_to_camera_to_project(live_factory, tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_killed_worker_job_is_reclaimed_and_succeeds(live_factory, tmp_path: Path) -> None:
-    live = live_factory(lease_s=2)
+    live = live_factory(lease_s=2, heartbeat_s=0.5)
     first = live.start_worker()
     auth = live.new_key()
     genome = synthetic.typical_target_camera(SIZE)

@@ -6,10 +6,11 @@ import threading
 from datetime import timedelta
 
 import pytest
-from sqlalchemy import select
+from sqlalchemy import select, text
+from sqlalchemy.exc import IntegrityError
 
 from app.db import queue, repo
-from app.db.models import Calibration, Court, Job, new_id, utcnow
+from app.db.models import Calibration, Court, Job, JobStage, JobStatus, new_id, utcnow
 from app.db.session import make_engine, make_sessionmaker
 from app.settings import Settings
 
@@ -206,3 +207,106 @@ def test_newest_upload_stays_the_active_camera(engine) -> None:
         assert court is not None and court.active_calibration_id == newer_cal.id
         assert len(session.scalars(select(Calibration)).all()) == 2
     assert job_row(engine, newer_id).calibration_id == newer_cal.id
+
+
+def test_retry_waits_out_its_backoff(engine) -> None:
+    _, [job_id] = add_jobs(engine, 1, max_attempts=3)
+    now = utcnow()
+    assert queue.claim(engine, "w", lease_s=60, now=now) is not None
+    status = queue.finish_failure(
+        engine, job_id, "w", "internal_error", "boom", True, now=now, retry_delay_s=5.0
+    )
+    assert status == JobStatus.QUEUED
+    assert job_row(engine, job_id).run_after == now + timedelta(seconds=5)
+    assert queue.claim(engine, "w", lease_s=60, now=now + timedelta(seconds=4.9)) is None
+    again = queue.claim(engine, "w", lease_s=60, now=now + timedelta(seconds=5))
+    assert again is not None and again.attempt == 2
+    assert job_row(engine, job_id).run_after is None
+
+
+def test_retry_delay_doubles_up_to_its_cap() -> None:
+    delays = [queue.retry_delay_s(attempt, base_s=5, max_s=30) for attempt in (1, 2, 3, 4, 5)]
+    assert delays == [5, 10, 20, 30, 30]
+
+
+def test_claim_and_heartbeat_record_the_workers_last_sign_of_life(engine) -> None:
+    _, [job_id] = add_jobs(engine, 1)
+    now = utcnow()
+    assert queue.claim(engine, "w", lease_s=10, now=now) is not None
+    assert job_row(engine, job_id).heartbeat_at == now
+    assert queue.heartbeat(engine, job_id, "w", lease_s=10, now=now + timedelta(seconds=2))
+    row = job_row(engine, job_id)
+    assert row.heartbeat_at == now + timedelta(seconds=2)
+    assert row.lease_expires_at == now + timedelta(seconds=12)
+
+
+@pytest.mark.parametrize("column", ["status", "stage"])
+def test_the_database_refuses_unknown_status_and_stage(engine, column: str) -> None:
+    _, [job_id] = add_jobs(engine, 1)
+    with pytest.raises(IntegrityError), engine.begin() as conn:
+        conn.execute(text(f"UPDATE jobs SET {column} = 'paused' WHERE id = :id"), {"id": job_id})
+    row = job_row(engine, job_id)
+    assert (row.status, row.stage) == (JobStatus.QUEUED, JobStage.QUEUED)
+
+
+def test_claims_take_turns_across_tenants(engine) -> None:
+    """Tenant A queued three jobs before tenant B queued its three: workers alternate."""
+    _, a_ids = add_jobs(engine, 3)
+    _, b_ids = add_jobs(engine, 3)
+    claimed = [queue.claim(engine, f"w{i}", lease_s=60) for i in range(6)]
+    assert [job.id for job in claimed if job] == [
+        a_ids[0],
+        b_ids[0],
+        a_ids[1],
+        b_ids[1],
+        a_ids[2],
+        b_ids[2],
+    ]
+
+
+def test_a_tenant_with_nothing_running_goes_first(engine) -> None:
+    _, a_ids = add_jobs(engine, 4)
+    _, [b_id] = add_jobs(engine, 1)
+    claimed = [queue.claim(engine, f"w{i}", lease_s=60) for i in range(3)]
+    # B's one job does not wait behind A's four; then A and B have one running each: oldest first
+    assert [job.id for job in claimed if job] == [a_ids[0], b_id, a_ids[1]]
+
+
+def test_a_dead_workers_job_does_not_count_as_running(engine) -> None:
+    _, a_ids = add_jobs(engine, 2)
+    _, [b_id] = add_jobs(engine, 1)
+    now = utcnow()
+    assert queue.claim(engine, "dead", lease_s=10, now=now).id == a_ids[0]  # type: ignore[union-attr]
+    # its lease ran out: A has nothing running, like B, and A's job is the oldest claimable
+    later = now + timedelta(seconds=11)
+    assert queue.claim(engine, "w", lease_s=10, now=later).id == a_ids[0]  # type: ignore[union-attr]
+    assert queue.claim(engine, "w", lease_s=10, now=later).id == b_id  # type: ignore[union-attr]
+
+
+def test_jobs_of_one_court_finishing_together_do_not_deadlock(engine) -> None:
+    """Both transactions lock the court: they must queue on it, not deadlock (PostgreSQL)."""
+    _, job_ids = add_jobs(engine, 40)
+    errors: list[BaseException] = []
+
+    def finish(job: queue.ClaimedJob, worker_id: str, barrier: threading.Barrier) -> None:
+        barrier.wait()
+        try:
+            queue.finish_success(engine, job, worker_id, make_calibration(job), {})
+        except BaseException as exc:  # surfaced below
+            errors.append(exc)
+
+    for _ in range(20):
+        pair = [queue.claim(engine, f"w{i}", lease_s=60) for i in range(2)]
+        barrier = threading.Barrier(2)
+        threads = [
+            threading.Thread(target=finish, args=(job, f"w{i}", barrier))
+            for i, job in enumerate(pair)
+            if job is not None
+        ]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(30)
+    assert errors == []
+    with make_sessionmaker(engine)() as session:
+        assert len(session.scalars(select(Calibration)).all()) == 40

@@ -1,0 +1,66 @@
+"""What GET /jobs/{id} says about a job in the queue: its enums, and whether its worker is alive."""
+
+from __future__ import annotations
+
+from datetime import timedelta
+
+import httpx
+
+from app.db import queue, repo
+from app.db.models import JobStage, JobStatus, new_id, utcnow
+from app.db.session import make_engine, make_sessionmaker
+from app.settings import Settings
+
+
+def queued_job(settings: Settings) -> tuple[dict[str, str], str]:
+    """A tenant's key and one queued job of it, made without an upload."""
+    engine = make_engine(settings)
+    try:
+        with make_sessionmaker(engine).begin() as session:
+            key_row, key = repo.create_api_key(session, name="t")
+            court = repo.create_court(session, key_row.tenant_id, "c", "wsf")
+            job = repo.new_job(
+                session,
+                job_id=new_id(),
+                tenant_id=key_row.tenant_id,
+                court_id=court.id,
+                media_kind="images",
+                media_files=["000.png"],
+                params={},
+                max_attempts=3,
+            )
+        return {"Authorization": f"Bearer {key}"}, job.id
+    finally:
+        engine.dispose()
+
+
+def test_a_job_whose_worker_stopped_renewing_is_shown_stale(
+    client: httpx.Client, settings: Settings
+) -> None:
+    auth, job_id = queued_job(settings)
+    body = client.get(f"/jobs/{job_id}", headers=auth).json()
+    assert (body["status"], body["heartbeat_at"], body["stale"]) == ("queued", None, False)
+
+    engine = make_engine(settings)
+    try:
+        assert queue.claim(engine, "alive", lease_s=10) is not None
+        body = client.get(f"/jobs/{job_id}", headers=auth).json()
+        assert (body["status"], body["stale"]) == ("running", False)
+        assert body["heartbeat_at"] is not None
+
+        # the worker was SIGKILLed 11 s ago, just after its last renewal of a 10 s lease
+        assert queue.release(engine, job_id, "alive")
+        assert queue.claim(engine, "killed", lease_s=10, now=utcnow() - timedelta(seconds=11))
+        body = client.get(f"/jobs/{job_id}", headers=auth).json()
+        assert (body["status"], body["stale"]) == ("running", True)
+    finally:
+        engine.dispose()
+
+
+def test_the_api_enums_are_the_database_enums(client: httpx.Client) -> None:
+    schemas = client.get("/openapi.json").json()["components"]["schemas"]
+    job = schemas["JobOut"]["properties"]
+    assert job["status"]["enum"] == [s.value for s in JobStatus]
+    assert job["stage"]["enum"] == [s.value for s in JobStage]
+    assert job["status"]["enum"] == ["queued", "running", "succeeded", "failed"]
+    assert schemas["JobAccepted"]["properties"]["status"]["enum"] == job["status"]["enum"]

@@ -1,0 +1,53 @@
+"""A tenant's share of the queue: more uploads than max_queued_jobs_per_tenant waiting get 429."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from app.db import queue
+from app.db.migrate import upgrade_head
+from app.db.session import make_engine
+from app.main import create_app
+from tests.service.conftest import api_client, make_settings, new_key
+from tests.service.helpers import files, png_bytes
+from tests.service.test_api import assert_error, make_court
+from tests.service.test_uploads import jobs_in_db, stored_job_dirs, upload
+
+
+def test_a_full_queue_is_429_with_retry_after_for_that_tenant_only(tmp_path: Path) -> None:
+    settings = make_settings(
+        tmp_path / "data", max_queued_jobs_per_tenant=2, queue_full_retry_after_s=17
+    )
+    upgrade_head(settings)
+    busy = {"Authorization": f"Bearer {new_key(settings, 'busy')}"}
+    other = {"Authorization": f"Bearer {new_key(settings, 'other')}"}
+    image = files(png_bytes(seed=1))
+    with api_client(create_app(settings)) as client:
+        court_id = make_court(client, busy)
+        for _ in range(2):
+            assert upload(client, busy, court_id, image).status_code == 202
+        refused = upload(client, busy, court_id, image)
+        assert_error(refused, 429, "too_many_queued_jobs")
+        assert refused.headers["retry-after"] == "17"
+        assert len(jobs_in_db(settings)) == 2 and len(stored_job_dirs(settings)) == 2
+
+        # another tenant is not affected
+        other_court = make_court(client, other)
+        assert upload(client, other, other_court, image).status_code == 202
+
+        # once a job is taken off the queue there is room again
+        engine = make_engine(settings)
+        try:
+            assert queue.claim(engine, "w", settings.lease_s) is not None
+        finally:
+            engine.dispose()
+        assert upload(client, busy, court_id, image).status_code == 202
+        assert_error(upload(client, busy, court_id, image), 429, "too_many_queued_jobs")
+
+
+def test_the_openapi_document_lists_429_for_uploads(tmp_path: Path) -> None:
+    settings = make_settings(tmp_path / "data")
+    upgrade_head(settings)
+    with api_client(create_app(settings)) as client:
+        spec = client.get("/openapi.json").json()
+    assert "429" in spec["paths"]["/courts/{court_id}/calibrations"]["post"]["responses"]

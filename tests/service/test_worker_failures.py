@@ -1,0 +1,147 @@
+"""How the worker records a failed job: the exception table, retry backoff, and a database that
+is away while the failure is recorded."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from pathlib import Path
+
+import pytest
+from sqlalchemy.exc import OperationalError
+
+from app.calib.pipeline import CourtNotFound
+from app.db import queue
+from app.db.migrate import upgrade_head
+from app.db.models import JobStatus, utcnow
+from app.db.session import make_engine
+from app.settings import Settings
+from tests.service.conftest import make_settings
+from tests.service.test_queue import add_jobs, job_row
+from worker import main as worker_main
+from worker.errors import classify
+from worker.media import MediaError
+
+
+def db_down() -> OperationalError:
+    return OperationalError("UPDATE jobs ...", {}, ConnectionRefusedError("connection refused"))
+
+
+@pytest.mark.parametrize(
+    ("exc", "code", "retryable", "log_traceback"),
+    [
+        (MediaError("corrupt_image", "cannot decode 000.png"), "corrupt_image", False, False),
+        (CourtNotFound("no court lines"), "court_not_found", False, False),
+        (ValueError("array must not contain infs or NaNs"), "internal_error", True, True),
+        (ZeroDivisionError("float division by zero"), "internal_error", True, True),
+        (db_down(), "database_error", True, True),
+        (OSError(28, "No space left on device"), "storage_error", True, True),
+        (MemoryError(), "out_of_memory", True, True),
+    ],
+)
+def test_each_exception_has_one_code_and_retryability(
+    exc: Exception, code: str, retryable: bool, log_traceback: bool
+) -> None:
+    failure = classify(exc)
+    assert (failure.code, failure.retryable, failure.log_traceback) == (
+        code,
+        retryable,
+        log_traceback,
+    )
+    assert failure.message
+
+
+def test_a_value_error_is_ours_not_invalid_input() -> None:
+    failure = classify(ValueError("SVD did not converge"))
+    assert failure.code == "internal_error"
+    assert failure.message == "ValueError: SVD did not converge"
+
+
+@pytest.fixture
+def settings(tmp_path: Path) -> Settings:
+    # a short lease: recording a failure is given up after one lease
+    s = make_settings(
+        tmp_path / "data",
+        lease_s=1.0,
+        heartbeat_s=0.3,
+        progress_interval_s=0.1,
+        retry_backoff_s=30.0,
+    )
+    upgrade_head(s)
+    return s
+
+
+def run_failing_job(settings: Settings, exc: Exception, monkeypatch) -> tuple[str, str]:
+    """Claim a job and process it with a background step that raises `exc`: (status, job id)."""
+
+    def broken_background(settings: Settings, job: queue.ClaimedJob):
+        raise exc
+
+    monkeypatch.setattr(worker_main, "_background", broken_background)
+    engine = make_engine(settings)
+    try:
+        _, [job_id] = add_jobs(engine, 1)
+        job = queue.claim(engine, "w", settings.lease_s)
+        assert job is not None
+        shutdown = worker_main.Shutdown(threading.Event())
+        return worker_main.process_job(engine, settings, job, "w", shutdown), job_id
+    finally:
+        engine.dispose()
+
+
+def test_a_bug_is_logged_with_its_traceback_and_retried_after_a_backoff(
+    settings: Settings, monkeypatch, caplog
+) -> None:
+    before = utcnow()
+    with caplog.at_level(logging.ERROR, logger="squashcal.worker"):
+        status, job_id = run_failing_job(settings, ValueError("bad numerics"), monkeypatch)
+    assert status == JobStatus.QUEUED
+    [record] = [r for r in caplog.records if r.exc_info]
+    assert isinstance(record.exc_info[1], ValueError)
+    engine = make_engine(settings)
+    try:
+        row = job_row(engine, job_id)
+        assert (row.error_code, row.error_message) == ("internal_error", "ValueError: bad numerics")
+        assert row.run_after is not None
+        assert 29 < (row.run_after - before).total_seconds() < 32  # the first backoff: 30 s
+        assert queue.claim(engine, "w2", settings.lease_s) is None  # not before then
+    finally:
+        engine.dispose()
+
+
+def test_a_failure_is_recorded_once_the_database_is_back(
+    settings: Settings, monkeypatch, caplog
+) -> None:
+    real_finish_failure = queue.finish_failure
+    calls = []
+
+    def flaky_finish_failure(*args, **kwargs):
+        calls.append(1)
+        if len(calls) <= 2:
+            raise db_down()
+        return real_finish_failure(*args, **kwargs)
+
+    monkeypatch.setattr(queue, "finish_failure", flaky_finish_failure)
+    status, job_id = run_failing_job(settings, CourtNotFound("no court"), monkeypatch)
+    assert status == JobStatus.FAILED and len(calls) == 3
+    assert "retrying" in caplog.text
+    engine = make_engine(settings)
+    try:
+        assert job_row(engine, job_id).error_code == "court_not_found"
+    finally:
+        engine.dispose()
+
+
+def test_a_database_away_for_good_does_not_kill_the_worker(settings: Settings, monkeypatch) -> None:
+    def finish_failure_down(*args, **kwargs):
+        raise db_down()
+
+    monkeypatch.setattr(queue, "finish_failure", finish_failure_down)
+    # process_job returns (the worker goes on polling); the job's lease brings it back
+    status, job_id = run_failing_job(settings, CourtNotFound("no court"), monkeypatch)
+    assert status == "unrecorded"
+    engine = make_engine(settings)
+    try:
+        assert job_row(engine, job_id).status == JobStatus.RUNNING
+    finally:
+        engine.dispose()
