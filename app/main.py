@@ -10,7 +10,8 @@ from collections.abc import AsyncIterator
 from fastapi import FastAPI
 
 from app.api import api_router
-from app.api.camera_cache import AuthCache, CameraCache
+from app.api.body_limit import BodyLimitMiddleware
+from app.api.camera_cache import CameraCache
 from app.api.deps import AppState
 from app.api.errors import install_error_handlers
 from app.db.migrate import head_revision
@@ -29,7 +30,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         engine=engine,
         sessions=sessions,
         cameras=CameraCache(sessions, settings.camera_refresh_s, settings.camera_cache_size),
-        auth=AuthCache(settings.auth_cache_s),
         head_revision=head_revision(settings),
     )
 
@@ -55,5 +55,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.squashcal = state
     install_error_handlers(app)
+    app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_json_body_bytes)
     app.include_router(api_router)
     return app

@@ -41,6 +41,7 @@ class CourtOut(BaseModel):
 
 class CourtList(BaseModel):
     courts: list[CourtOut]
+    next_offset: int | None = Field(description="`offset` of the next page; null on the last page")
 
 
 class JobAccepted(BaseModel):

@@ -27,6 +27,8 @@ class Settings(BaseSettings):
     max_video_width_px: int = Field(default=4096, ge=1)
     max_video_height_px: int = Field(default=4096, ge=1)
     max_video_duration_s: float = Field(default=900.0, gt=0)
+    # JSON bodies (everything but uploads) are read whole: 100 000 points fit in about 4 MB
+    max_json_body_bytes: int = Field(default=8 * 1024 * 1024, ge=1024)
     upload_chunk_bytes: int = Field(default=1024 * 1024, ge=1024)
 
     # Background: frames sampled from a clip, spread over its whole length
@@ -46,7 +48,6 @@ class Settings(BaseSettings):
     # Caches of the API process (the /project hot path does no database work)
     camera_refresh_s: float = Field(default=0.5, gt=0)
     camera_cache_size: int = Field(default=10_000, ge=1)
-    auth_cache_s: float = Field(default=30.0, ge=0)
 
     @model_validator(mode="after")
     def _lease_outlives_progress(self) -> Settings:

@@ -207,6 +207,7 @@ async def receive_upload(request: Request, target_dir: Path, settings: Settings)
             "upload_too_large",
             f"the upload exceeds the limit of {settings.max_upload_bytes} bytes",
         )
+    _check_boundary(boundary)
     receiver = _Receiver(target_dir, settings)
     callbacks: Any = {
         name: getattr(receiver, name)
@@ -220,9 +221,9 @@ async def receive_upload(request: Request, target_dir: Path, settings: Settings)
             "on_headers_finished",
         )
     }
-    parser = MultipartParser(boundary, callbacks)
     received = 0
     try:
+        parser = MultipartParser(boundary, callbacks)
         async for chunk in request.stream():
             received += len(chunk)
             if received > _body_limit(settings):
@@ -244,6 +245,28 @@ async def receive_upload(request: Request, target_dir: Path, settings: Settings)
     if not receiver.files:
         raise ApiError(422, "no_files", "the upload has no 'files' part")
     return ReceivedUpload(receiver.files, receiver.fields)
+
+
+# RFC 2046 section 5.1.1: 1 to 70 characters from this set, not ending with a space
+_BOUNDARY_CHARS = frozenset(
+    b"0123456789abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ'()+_,-./:=? "
+)
+MAX_BOUNDARY_CHARS = 70
+
+
+def _check_boundary(boundary: bytes) -> None:
+    """Refuse a boundary the RFC does not allow before the parser sees it (it raises on some)."""
+    if (
+        len(boundary) > MAX_BOUNDARY_CHARS
+        or boundary.endswith(b" ")
+        or not set(boundary) <= _BOUNDARY_CHARS
+    ):
+        raise ApiError(
+            422,
+            "invalid_multipart",
+            f"the multipart boundary must be 1 to {MAX_BOUNDARY_CHARS} letters, digits or "
+            "'()+_,-./:=? (RFC 2046)",
+        )
 
 
 def _body_limit(settings: Settings) -> int:
@@ -361,6 +384,11 @@ def parse_job_params(fields: dict[str, str], image_size: tuple[int, int]) -> dic
         except json.JSONDecodeError as exc:
             raise ApiError(
                 422, "invalid_start_camera", f"start_camera is not JSON: {exc}"
+            ) from None
+        except RecursionError:
+            # a camera is a flat list or a shallow object; thousands of nested brackets are not
+            raise ApiError(
+                422, "invalid_start_camera", "start_camera is nested too deeply to be a camera"
             ) from None
         except ValueError as exc:
             raise ApiError(422, "invalid_start_camera", f"start_camera: {exc}") from None

@@ -9,7 +9,7 @@ import secrets
 from collections.abc import Sequence
 from typing import Any, TypeVar
 
-from sqlalchemy import select, update
+from sqlalchemy import Connection, bindparam, select, update
 from sqlalchemy.orm import Session
 
 from app.db.models import ApiKey, Calibration, Court, Job, Tenant, utcnow
@@ -63,10 +63,16 @@ def revoke_api_key(session: Session, key_id: str) -> bool:
     return bool(result.rowcount)  # type: ignore[attr-defined]
 
 
-def tenant_for_key_hash(session: Session, key_sha256: str) -> str | None:
-    return session.scalar(
-        select(ApiKey.tenant_id).where(ApiKey.key_sha256 == key_sha256, ApiKey.revoked_at.is_(None))
-    )
+# compiled once: it runs on every authenticated request
+_TENANT_FOR_KEY = select(ApiKey.tenant_id).where(
+    ApiKey.key_sha256 == bindparam("key_sha256"), ApiKey.revoked_at.is_(None)
+)
+
+
+def tenant_for_key(connection: Connection | Session, key: str) -> str | None:
+    """The tenant of an API key that exists and is not revoked, else None."""
+    tenant_id = connection.scalar(_TENANT_FOR_KEY, {"key_sha256": hash_key(key)})
+    return str(tenant_id) if tenant_id is not None else None
 
 
 def get_owned(session: Session, model: type[Owned], tenant_id: str, resource_id: str) -> Owned:
@@ -77,9 +83,14 @@ def get_owned(session: Session, model: type[Owned], tenant_id: str, resource_id:
     return row
 
 
-def list_courts(session: Session, tenant_id: str) -> Sequence[Court]:
+def list_courts(session: Session, tenant_id: str, limit: int, offset: int = 0) -> Sequence[Court]:
+    """One page of the tenant's courts, oldest first (a stable order, so pages do not overlap)."""
     return session.scalars(
-        select(Court).where(Court.tenant_id == tenant_id).order_by(Court.created_at, Court.id)
+        select(Court)
+        .where(Court.tenant_id == tenant_id)
+        .order_by(Court.created_at, Court.id)
+        .limit(limit)
+        .offset(offset)
     ).all()
 
 

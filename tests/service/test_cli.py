@@ -41,7 +41,7 @@ def test_migrate_and_manage_keys(tmp_path: Path) -> None:
     settings = make_settings(data_dir)
     engine = make_engine(settings)
     with make_sessionmaker(engine)() as session:
-        tenant_id = repo.tenant_for_key_hash(session, repo.hash_key(key))
+        tenant_id = repo.tenant_for_key(session, key)
         [row] = repo.list_api_keys(session)
     engine.dispose()
     assert tenant_id is not None and row.tenant_id == tenant_id
