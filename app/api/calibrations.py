@@ -8,12 +8,14 @@ from fastapi import APIRouter, Request
 from fastapi.responses import FileResponse, JSONResponse
 from starlette.concurrency import run_in_threadpool
 
+from app import media
 from app.api import uploads
 from app.api.deps import SessionDep, StateDep, TenantDep
 from app.api.errors import ApiError
 from app.api.serialize import calibration_out
-from app.db import media, repo
+from app.db import repo
 from app.db.models import Calibration, Court, new_id
+from app.media import probe
 from app.schemas import CalibrationOut, ErrorResponse, JobAccepted
 
 router = APIRouter(tags=["calibrations"])
@@ -70,14 +72,15 @@ async def upload_calibration(
 
     await run_in_threadpool(owned_court)  # 404 before reading a byte of the body
     job_id = new_id()
-    target = media.job_dir(settings, job_id)
-    target.mkdir(parents=True)
+    store = media.media_store(settings)
+    target = store.create_job_dir(job_id)
     try:
         received = await uploads.receive_upload(request, target, settings)
-        summary = await run_in_threadpool(uploads.check_media, target, received.files, settings)
+        summary = await run_in_threadpool(probe.check_upload, target, received.files, settings)
         params = uploads.parse_job_params(received.fields, summary.image_size)
         params["image_size"] = list(summary.image_size)
-        await run_in_threadpool(media.fsync_tree, target)
+        # on disk (and on a shared volume, visible to every host) before the job exists
+        await run_in_threadpool(store.persist, target)
 
         def commit_job() -> None:
             with state.sessions.begin() as session:
@@ -94,7 +97,7 @@ async def upload_calibration(
 
         await run_in_threadpool(commit_job)
     except BaseException:
-        uploads.discard(target)
+        store.remove_job_dir(job_id)
         raise
     return JSONResponse(
         {"job_id": job_id, "status": "queued"},

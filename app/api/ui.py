@@ -11,7 +11,7 @@ from fastapi.responses import FileResponse
 from app.api.deps import StateDep
 from app.api.errors import ApiError
 from app.calib.court import COURT_SPECS
-from app.db.media import IMAGE_TYPES, VIDEO_TYPES
+from app.media.sniff import IMAGE_TYPES, VIDEO_TYPES
 from app.schemas import PageConfig
 
 STATIC_DIR = Path(__file__).resolve().parents[1] / "static"

@@ -223,7 +223,7 @@ def test_upload_size_limit_is_413_and_keeps_nothing(tmp_path: Path) -> None:
     auth = {"Authorization": f"Bearer {new_key(settings)}"}
     with api_client(create_app(settings)) as client:
         court_id = make_court(client, auth)
-        small = png_bytes(40, 40)
+        small = png_bytes(64, 64)
         assert len(small) < 20_000
         assert upload(client, auth, court_id, files(small)).status_code == 202
         big = png_bytes(200, 200)  # noise does not compress: ~120 kB
@@ -232,7 +232,7 @@ def test_upload_size_limit_is_413_and_keeps_nothing(tmp_path: Path) -> None:
         assert_error(response, 413, "upload_too_large")
         # several files that are each small but together too large
         response = upload(
-            client, auth, court_id, files(*[png_bytes(60, 60, seed=s) for s in range(3)])
+            client, auth, court_id, files(*[png_bytes(64, 48, seed=s) for s in range(3)])
         )
         assert_error(response, 413, "upload_too_large")
     assert len(jobs_in_db(settings)) == 1
