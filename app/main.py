@@ -8,6 +8,7 @@ import logging
 from collections.abc import AsyncIterator
 
 from fastapi import FastAPI
+from sqlalchemy.orm import Session, sessionmaker
 
 from app.api import api_router
 from app.api.body_limit import BodyLimitMiddleware
@@ -16,9 +17,19 @@ from app.api.deps import AppState
 from app.api.errors import install_error_handlers
 from app.db.migrate import head_revision
 from app.db.session import make_engine, make_sessionmaker
+from app.media.store import media_store
+from app.media.sweep import sweep_quietly
 from app.settings import Settings, get_settings
 
 log = logging.getLogger("squashcal.api")
+
+
+async def _sweep_media_forever(settings: Settings, sessions: sessionmaker[Session]) -> None:
+    """Sweep stored media at start (orphans of a crash) and then every interval."""
+    store = media_store(settings)
+    while True:
+        await asyncio.to_thread(sweep_quietly, store, sessions, settings)
+        await asyncio.sleep(settings.media_sweep_interval_s)
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -36,12 +47,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         refresher = asyncio.create_task(state.cameras.run_refresher())
+        sweeper = asyncio.create_task(_sweep_media_forever(settings, sessions))
         try:
             yield
         finally:
-            refresher.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await refresher
+            for task in (refresher, sweeper):
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
             # a refresh already running in its thread outlives the cancelled task: let it end
             await asyncio.to_thread(state.cameras.wait_idle)
             engine.dispose()

@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import secrets
 from collections.abc import Sequence
+from datetime import datetime
 from typing import Any, TypeVar
 
 from sqlalchemy import Connection, bindparam, select, update
@@ -168,3 +169,14 @@ def api_key_for_hash(session: Session, key_sha256: str) -> ApiKey | None:
     return session.scalar(
         select(ApiKey).where(ApiKey.key_sha256 == key_sha256, ApiKey.revoked_at.is_(None))
     )
+
+
+def failed_job_ids_finished_before(session: Session, cutoff: datetime) -> list[str]:
+    """Jobs that failed for good before `cutoff`: their uploads are past the retention period."""
+    return list(
+        session.scalars(select(Job.id).where(Job.status == "failed", Job.finished_at < cutoff))
+    )
+
+
+def existing_job_ids(session: Session, job_ids: Sequence[str]) -> set[str]:
+    return set(session.scalars(select(Job.id).where(Job.id.in_(list(job_ids)))))
