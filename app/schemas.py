@@ -218,7 +218,8 @@ class ImagePointsRequest(StrictModel):
 
 class ImagePointsResponse(BaseModel):
     pixels: list[FinitePair | None] = Field(
-        description="[u, v] pixels; null where the point is behind the camera"
+        description="[u, v] pixels; null where the point is behind the camera or beyond the "
+        "lens's usable field (past the fold of its distortion model)"
     )
     in_image: list[bool]
     calibration_id: str

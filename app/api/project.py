@@ -84,7 +84,8 @@ def image_points_response(
     calibration_id: str | None,
 ) -> Response:
     """The ImagePointsResponse of floor `points` through `genome` (also used per calibration)."""
-    pixels = camera.floor_to_pixel(genome, _as_array(points))
+    # past the lens fold a floor point "projects" to a ghost pixel, often inside the picture
+    pixels = camera.floor_to_image_pixel(genome, _as_array(points))
     in_image = camera.pixels_in_image(pixels, image_size)
     return _json(
         {
@@ -109,7 +110,8 @@ def project(body: ProjectRequest, state: StateDep, tenant_id: TenantDep) -> Resp
 def image_points(
     court_id: str, body: ImagePointsRequest, state: StateDep, tenant_id: TenantDep
 ) -> Response:
-    """Floor (x, y) metres -> image pixels; null where the point is behind the camera."""
+    """Floor (x, y) metres -> image pixels; null where the point is behind the camera or beyond
+    the lens's usable field (past the fold of its distortion model)."""
     entry = state.cameras.get(tenant_id, court_id)
     genome = _calibrated(entry)
     assert entry.image_size is not None

@@ -119,7 +119,7 @@ def test_corrupt_image_body(client: httpx.Client, auth: dict[str, str], settings
     assert_rejected_and_nothing_kept(response, settings, 422, "corrupt_image")
 
 
-def _png_with_header_size(width: int, height: int) -> bytes:
+def png_with_header_size(width: int, height: int) -> bytes:
     """A PNG whose IHDR claims width x height, with a tiny (inconsistent) body: a bomb's header."""
     ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
     chunk = b"IHDR" + ihdr
@@ -135,7 +135,7 @@ def test_decompression_bomb_rejected_from_header(
     client: httpx.Client, auth: dict[str, str], settings: Settings
 ) -> None:
     court_id = make_court(client, auth)
-    bomb = _png_with_header_size(100_000, 100_000)  # 10 gigapixels claimed in ~1 kB
+    bomb = png_with_header_size(100_000, 100_000)  # 10 gigapixels claimed in ~1 kB
     response = upload(client, auth, court_id, files(bomb))
     assert_rejected_and_nothing_kept(response, settings, 422, "image_too_large")
 
