@@ -15,6 +15,7 @@ from app.api.body_limit import BodyLimitMiddleware
 from app.api.camera_cache import CameraCache
 from app.api.deps import AppState
 from app.api.errors import install_error_handlers
+from app.api.security_headers import SecurityHeadersMiddleware
 from app.db.migrate import head_revision
 from app.db.session import make_engine, make_sessionmaker
 from app.media.store import media_store
@@ -65,9 +66,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         summary="Squash court camera calibration: upload frames or a clip, get a camera, map "
         "pixels to court metres.",
         lifespan=lifespan,
+        # served locally by app.api.docs, not from a public CDN
+        docs_url=None,
+        redoc_url=None,
     )
     app.state.squashcal = state
     install_error_handlers(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_json_body_bytes)
+    app.add_middleware(SecurityHeadersMiddleware)
     app.include_router(api_router)
     return app

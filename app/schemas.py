@@ -231,5 +231,4 @@ class Health(BaseModel):
 
 class Ready(BaseModel):
     status: Literal["ready"]
-    database: str
     revision: str | None

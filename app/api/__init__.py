@@ -10,6 +10,7 @@ from app.api import (
     court_jobs,
     courts,
     demo,
+    docs,
     health,
     jobs,
     me,
@@ -19,7 +20,7 @@ from app.api import (
 )
 
 api_router = APIRouter()
-for module in (health, courts, calibrations, jobs, project, ui):
+for module in (health, courts, calibrations, jobs, project, ui, docs):
     api_router.include_router(module.router)
 # the browser page's resources (issue 7)
 for module in (me, court_jobs, cameras, pictures, demo):
