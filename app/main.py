@@ -15,11 +15,13 @@ from app.api.body_limit import BodyLimitMiddleware
 from app.api.camera_cache import CameraCache
 from app.api.deps import AppState
 from app.api.errors import install_error_handlers
+from app.api.openapi import install_openapi
 from app.api.security_headers import SecurityHeadersMiddleware
 from app.db.migrate import head_revision
 from app.db.session import make_engine, make_sessionmaker
 from app.media.store import media_store
 from app.media.sweep import sweep_quietly
+from app.schemas import ErrorResponse
 from app.settings import Settings, get_settings
 
 log = logging.getLogger("squashcal.api")
@@ -31,6 +33,16 @@ async def _sweep_media_forever(settings: Settings, sessions: sessionmaker[Sessio
     while True:
         await asyncio.to_thread(sweep_quietly, store, sessions, settings)
         await asyncio.sleep(settings.media_sweep_interval_s)
+
+
+def error_schemas() -> dict[str, object]:
+    """ErrorResponse and ErrorDetail as OpenAPI component schemas."""
+    from pydantic.json_schema import models_json_schema
+
+    _, top = models_json_schema(
+        [(ErrorResponse, "serialization")], ref_template="#/components/schemas/{model}"
+    )
+    return dict(top["$defs"])
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -75,4 +87,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_json_body_bytes)
     app.add_middleware(SecurityHeadersMiddleware)
     app.include_router(api_router)
+    install_openapi(app, error_schemas())
     return app

@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
 JobStatus = Literal["queued", "running", "succeeded", "failed"]
 JobStage = Literal["queued", "background", "edges", "optimising", "refining", "storing", "done"]
-# (u, v) pixels or (x, y) floor metres; JSON has no NaN/Infinity, and Python's "NaN" tokens are refused
-FinitePair = tuple[float, float]
+# the court specifications of app.calib.court.COURT_SPECS (a test keeps the two equal)
+CourtSpecName = Literal["wsf", "psa", "doubles"]
+# (u, v) pixels or (x, y) floor metres; JSON has no NaN/Infinity, and Python's "NaN" tokens are refused.
+# A list of two, not tuple[float, float]: that would be `prefixItems` in the schema, which many
+# OpenAPI tools cannot read.
+FinitePair = Annotated[list[float], Field(min_length=2, max_length=2)]
 
 
 class StrictModel(BaseModel):
@@ -28,13 +32,15 @@ class ErrorResponse(BaseModel):
 
 class CourtCreate(StrictModel):
     name: str = Field(min_length=1, max_length=200)
-    spec: str = Field(default="wsf", description="court specification: wsf, psa or doubles")
+    spec: CourtSpecName = Field(
+        default="wsf", description="court specification: wsf, psa or doubles"
+    )
 
 
 class CourtOut(BaseModel):
     id: str
     name: str
-    spec: str
+    spec: CourtSpecName
     active_calibration_id: str | None
     created_at: datetime
 

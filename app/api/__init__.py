@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Depends
 
 from app.api import (
     calibrations,
@@ -18,8 +18,9 @@ from app.api import (
     project,
     ui,
 )
+from app.api.deps import reject_unknown_query
 
-api_router = APIRouter()
+api_router = APIRouter(dependencies=[Depends(reject_unknown_query)])
 for module in (health, courts, calibrations, jobs, project, ui, docs):
     api_router.include_router(module.router)
 # the browser page's resources (issue 7)

@@ -31,6 +31,7 @@ _UPLOAD_FORM: dict[str, Any] = {
                     "properties": {
                         "files": {
                             "type": "array",
+                            "minItems": 1,
                             "items": {"type": "string", "format": "binary"},
                             "description": "one or more PNG/JPEG images of the same fixed camera,"
                             " or one MP4/MOV/MKV/AVI/WebM clip (type read from the bytes)",
@@ -40,7 +41,7 @@ _UPLOAD_FORM: dict[str, Any] = {
                             "description": "optional start camera: a genome (15 numbers) or the "
                             'OpenCV JSON form {"K", "dist", "rvec", "tvec", "image_size"}',
                         },
-                        "seed": {"type": "integer", "minimum": 0},
+                        "seed": {"type": "integer", "minimum": 0, "maximum": 2**63 - 1},
                         "bundle": {"type": "string", "description": "GA operator bundle name"},
                     },
                 }

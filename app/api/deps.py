@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import Depends, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
@@ -70,3 +70,29 @@ def get_tenant(
 
 
 TenantDep = Annotated[str, Depends(get_tenant)]
+
+
+def reject_unknown_query(request: Request) -> None:
+    """422 for a query parameter the operation does not have: a misspelt `limt=5` is silently
+    ignored otherwise, and the caller never learns why the limit did not apply."""
+    route = request.scope.get("route")
+    dependant = getattr(route, "dependant", None)
+    # the browser page and its files are not API operations: links may carry any query
+    if dependant is None or not request.query_params or not route.include_in_schema:  # type: ignore[union-attr]
+        return
+    known = {p.alias for p in _query_params(dependant)}
+    unknown = sorted(set(request.query_params) - known)
+    if unknown:
+        expected = ", ".join(sorted(known)) or "none"
+        raise ApiError(
+            422,
+            "unknown_query_parameter",
+            f"unknown query parameter(s) {', '.join(unknown)}; this operation takes: {expected}",
+        )
+
+
+def _query_params(dependant: Any) -> list[Any]:
+    params = list(dependant.query_params)
+    for sub in dependant.dependencies:
+        params += _query_params(sub)
+    return params

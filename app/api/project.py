@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import orjson
 from fastapi import APIRouter
@@ -47,13 +49,13 @@ def _json(payload: dict[str, object]) -> Response:
     return Response(orjson.dumps(payload), media_type="application/json")
 
 
-def _as_array(pairs: list[tuple[float, float]]) -> np.ndarray:
+def _as_array(pairs: Sequence[Sequence[float]]) -> np.ndarray:
     return np.asarray(pairs, dtype=np.float64).reshape(-1, 2)
 
 
 def floor_points_response(
     genome: np.ndarray,
-    pixels: list[tuple[float, float]],
+    pixels: Sequence[Sequence[float]],
     court_size_m: tuple[float, float],
     calibration_id: str | None,
 ) -> Response:
@@ -79,7 +81,7 @@ def floor_points_response(
 
 def image_points_response(
     genome: np.ndarray,
-    points: list[tuple[float, float]],
+    points: Sequence[Sequence[float]],
     image_size: tuple[int, int],
     calibration_id: str | None,
 ) -> Response:

@@ -416,7 +416,7 @@ CORPUS = [
     Case("/project 100 001 points", _project_100001_points, 422, "invalid_request"),
     Case("image-points NaN", _image_points_nan, 422, "invalid_request"),
     Case("court with empty name", _court_with_empty_name, 422, "invalid_request"),
-    Case("court with unknown spec", _court_with_unknown_spec, 422, "unknown_spec"),
+    Case("court with unknown spec", _court_with_unknown_spec, 422, "invalid_request"),
     # ids
     Case("/project unknown court", _project_unknown_court, 404, "court_not_found"),
     Case("/project other tenant's court", _project_other_tenants_court, 404, "court_not_found"),
