@@ -58,3 +58,14 @@ def test_migrate_and_manage_keys(tmp_path: Path) -> None:
     assert again.returncode == 1 and "no active key" in again.stderr
     unknown_tenant = squashcal(data_dir, "keys", "create", "--name", "x", "--tenant", "nope")
     assert unknown_tenant.returncode == 1 and "no tenant" in unknown_tenant.stderr
+
+
+def test_commands_on_a_never_migrated_data_dir_say_what_to_run(tmp_path: Path) -> None:
+    data_dir = tmp_path / "fresh"
+    for args in (("keys", "list"), ("keys", "create", "--name", "x"), ("worker", "--once")):
+        result = squashcal(data_dir, *args)
+        assert result.returncode == 2, (args, result.stdout, result.stderr)
+        assert "run `squashcal migrate` first" in result.stderr
+        assert "Traceback" not in result.stderr and "sqlalchemy" not in result.stderr.lower()
+    assert squashcal(data_dir, "migrate").returncode == 0
+    assert squashcal(data_dir, "keys", "list").returncode == 0
