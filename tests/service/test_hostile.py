@@ -6,6 +6,8 @@ media behind. Cases that need more than one request (revocation, paging) are sep
 
 from __future__ import annotations
 
+import struct
+import zlib
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -170,6 +172,28 @@ def _png_declaring_100000_square(t: Target) -> httpx.Response:
 def _png_declaring_7000_square(t: Target) -> httpx.Response:
     """The 142 KB PNG of zeros that used to pass: 49 Mpx is over the per-image limit."""
     return t.upload(_one_file(png_with_header_size(7000, 7000)))
+
+
+def zeros_png(width: int, height: int) -> bytes:
+    """A real, valid PNG of black RGB pixels, compressed row by row (never whole in memory)."""
+    compressor = zlib.compressobj(9)
+    row = bytes(1 + 3 * width)  # filter byte + pixels
+    idat = b"".join(compressor.compress(row) for _ in range(height)) + compressor.flush()
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        )
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
+
+
+ZEROS_7000 = zeros_png(7000, 7000)  # ~142 KB that decode to 147 MB
+
+
+def _real_png_of_7000_square_zeros(t: Target) -> httpx.Response:
+    return t.upload(_one_file(ZEROS_7000))
 
 
 def _png_1x1(t: Target) -> httpx.Response:
@@ -385,6 +409,9 @@ CORPUS = [
     Case("HTML named .png", _html_named_png, 415, "unsupported_media_type"),
     Case("PNG declaring 100000x100000", _png_declaring_100000_square, 422, "image_too_large"),
     Case("PNG declaring 7000x7000", _png_declaring_7000_square, 422, "image_too_large"),
+    Case(
+        "real 142 KB PNG of 7000x7000 zeros", _real_png_of_7000_square_zeros, 422, "image_too_large"
+    ),
     Case("valid 1x1 PNG", _png_1x1, 422, "image_too_small"),
     Case("valid 16x16 JPEG", _jpeg_16x16, 422, "image_too_small"),
     Case("32x32 video", _video_32x32, 422, "video_frame_too_small"),
