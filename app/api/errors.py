@@ -97,6 +97,9 @@ def install_error_handlers(app: FastAPI) -> None:
         code = getattr(exc, "code", None) or _STATUS_CODES.get(exc.status_code, "http_error")
         message = exc.detail if isinstance(exc.detail, str) else code.replace("_", " ")
         headers = getattr(exc, "headers", None)
+        if exc.status_code == 400 and isinstance(exc.__cause__, RecursionError):
+            # FastAPI's generic "error parsing the body": say what was wrong with it
+            code, message = "invalid_json", "the JSON body is nested too deeply to be parsed"
         if exc.status_code == 405:
             allowed = allowed_methods(request)
             headers = {**(headers or {}), "Allow": ", ".join(allowed)}

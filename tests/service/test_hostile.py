@@ -433,7 +433,7 @@ CORPUS = [
     # JSON bodies
     Case("JSON body over the limit (declared)", _huge_json_declared, 413, "body_too_large"),
     Case("JSON body over the limit (streamed)", _huge_json_streamed, 413, "body_too_large"),
-    Case("JSON nested 30 000 deep", _deep_json_camera_import, 400, "bad_request"),
+    Case("JSON nested 30 000 deep", _deep_json_camera_import, 400, "invalid_json"),
     Case("malformed JSON", _project_not_json, 422, "invalid_request"),
     Case("/project NaN", _project_nan, 422, "invalid_request"),
     Case("/project Infinity", _project_infinity, 422, "invalid_request"),
