@@ -17,6 +17,7 @@ from app.api.deps import AppState
 from app.api.errors import install_error_handlers
 from app.api.openapi import install_openapi
 from app.api.security_headers import SecurityHeadersMiddleware
+from app.db import repo
 from app.db.migrate import head_revision
 from app.db.session import make_engine, make_sessionmaker
 from app.media.store import media_store
@@ -54,6 +55,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         engine=engine,
         sessions=sessions,
         cameras=CameraCache(sessions, settings.camera_refresh_s, settings.camera_cache_size),
+        keys=repo.KeyLookup(engine),
         head_revision=head_revision(settings),
     )
 

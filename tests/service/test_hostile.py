@@ -556,3 +556,19 @@ def test_courts_are_listed_a_page_at_a_time(target: Target) -> None:
     assert t.other_court_id not in seen
     for bad in ("limit=0", "limit=501", "offset=-1", "offset=99999999999999999999", "limit=x"):
         assert_error(t.client.get(f"/courts?{bad}", headers=t.auth), 422, "invalid_request")
+
+
+def test_key_lookup_on_both_databases(any_db_settings: Settings) -> None:
+    engine = make_engine(any_db_settings)
+    try:
+        with make_sessionmaker(engine).begin() as session:
+            row, key = repo.create_api_key(session, name="k")
+        lookup = repo.KeyLookup(engine)
+        assert lookup.tenant_for(key) == row.tenant_id
+        assert lookup.tenant_for(key + "x") is None
+        assert lookup.tenant_for("' OR 1=1 --") is None
+        with make_sessionmaker(engine).begin() as session:
+            repo.revoke_api_key(session, row.id)
+        assert lookup.tenant_for(key) is None
+    finally:
+        engine.dispose()
