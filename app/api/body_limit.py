@@ -7,6 +7,8 @@ this a 50 MB body costs the API several times that in parsed objects.
 
 from __future__ import annotations
 
+import re
+
 from starlette.exceptions import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -23,7 +25,13 @@ class BodyTooLarge(HTTPException):
         )
 
 
+# the one operation that takes multipart (and streams it to disk under its own limits)
+_UPLOAD_PATH = re.compile(r"^/courts/[^/]+/calibrations$")
+
+
 def _is_upload(scope: Scope) -> bool:
+    if scope.get("method") != "POST" or not _UPLOAD_PATH.match(scope.get("path", "")):
+        return False
     for name, value in scope.get("headers", ()):
         if name == b"content-type":
             return value.split(b";", 1)[0].strip().lower() == b"multipart/form-data"

@@ -133,6 +133,16 @@ def _huge_json_streamed(t: Target) -> httpx.Response:
     )
 
 
+def _huge_multipart_to_a_json_operation(t: Target) -> httpx.Response:
+    """Only the upload streams multipart under its own limits; elsewhere the JSON limit holds."""
+    body = _multipart("b", 'form-data; name="pixels"', b"1" * (MAX_JSON_BODY_BYTES + 1))
+    return t.client.post(
+        "/project",
+        content=body,
+        headers={**t.auth, "content-type": "multipart/form-data; boundary=b"},
+    )
+
+
 def _deep_json_camera_import(t: Target) -> httpx.Response:
     body = b'{"camera": ' + b"[" * 30_000 + b"]" * 30_000 + b"}"
     return t.post_json_bytes(f"/courts/{t.court_id}/camera", body)
@@ -433,6 +443,12 @@ CORPUS = [
     # JSON bodies
     Case("JSON body over the limit (declared)", _huge_json_declared, 413, "body_too_large"),
     Case("JSON body over the limit (streamed)", _huge_json_streamed, 413, "body_too_large"),
+    Case(
+        "multipart over the limit to /project",
+        _huge_multipart_to_a_json_operation,
+        413,
+        "body_too_large",
+    ),
     Case("JSON nested 30 000 deep", _deep_json_camera_import, 400, "invalid_json"),
     Case("malformed JSON", _project_not_json, 422, "invalid_request"),
     Case("/project NaN", _project_nan, 422, "invalid_request"),
