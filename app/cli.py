@@ -16,6 +16,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "keys": ("app.cli_service", "manage API keys"),
 }
 
+# commands that use the tables: checked for a migrated database before they run (`run` migrates
+# by itself, `serve` answers /readyz with the same advice, `calibrate` uses no database)
+NEEDS_SCHEMA = frozenset({"keys", "worker"})
+
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="squashcal", description=__doc__)
@@ -34,6 +38,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
+    if args.command in NEEDS_SCHEMA:
+        from app.db.migrate import schema_problem
+        from app.settings import get_settings
+
+        problem = schema_problem(get_settings())
+        if problem is not None:
+            print(f"squashcal {args.command}: {problem}", file=sys.stderr)
+            return 2
     return int(args._module.run(args.command, args))
 
 

@@ -8,16 +8,42 @@ import logging
 from collections.abc import AsyncIterator
 
 from fastapi import FastAPI
+from sqlalchemy.orm import Session, sessionmaker
 
 from app.api import api_router
-from app.api.camera_cache import AuthCache, CameraCache
+from app.api.body_limit import BodyLimitMiddleware
+from app.api.camera_cache import CameraCache
 from app.api.deps import AppState
 from app.api.errors import install_error_handlers
+from app.api.openapi import install_openapi
+from app.api.security_headers import SecurityHeadersMiddleware
+from app.db import repo
 from app.db.migrate import head_revision
 from app.db.session import make_engine, make_sessionmaker
+from app.media.store import media_store
+from app.media.sweep import sweep_quietly
+from app.schemas import ErrorResponse
 from app.settings import Settings, get_settings
 
 log = logging.getLogger("squashcal.api")
+
+
+async def _sweep_media_forever(settings: Settings, sessions: sessionmaker[Session]) -> None:
+    """Sweep stored media at start (orphans of a crash) and then every interval."""
+    store = media_store(settings)
+    while True:
+        await asyncio.to_thread(sweep_quietly, store, sessions, settings)
+        await asyncio.sleep(settings.media_sweep_interval_s)
+
+
+def error_schemas() -> dict[str, object]:
+    """ErrorResponse and ErrorDetail as OpenAPI component schemas."""
+    from pydantic.json_schema import models_json_schema
+
+    _, top = models_json_schema(
+        [(ErrorResponse, "serialization")], ref_template="#/components/schemas/{model}"
+    )
+    return dict(top["$defs"])
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -29,19 +55,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         engine=engine,
         sessions=sessions,
         cameras=CameraCache(sessions, settings.camera_refresh_s, settings.camera_cache_size),
-        auth=AuthCache(settings.auth_cache_s),
+        keys=repo.KeyLookup(engine),
         head_revision=head_revision(settings),
     )
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         refresher = asyncio.create_task(state.cameras.run_refresher())
+        sweeper = asyncio.create_task(_sweep_media_forever(settings, sessions))
         try:
             yield
         finally:
-            refresher.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await refresher
+            for task in (refresher, sweeper):
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
             # a refresh already running in its thread outlives the cancelled task: let it end
             await asyncio.to_thread(state.cameras.wait_idle)
             engine.dispose()
@@ -52,8 +80,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         summary="Squash court camera calibration: upload frames or a clip, get a camera, map "
         "pixels to court metres.",
         lifespan=lifespan,
+        # served locally by app.api.docs, not from a public CDN
+        docs_url=None,
+        redoc_url=None,
     )
     app.state.squashcal = state
     install_error_handlers(app)
+    app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_json_body_bytes)
+    app.add_middleware(SecurityHeadersMiddleware)
     app.include_router(api_router)
+    install_openapi(app, error_schemas())
     return app

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -17,8 +17,12 @@ if TYPE_CHECKING:  # mypy cannot follow a computed Literal: it checks these as p
 else:
     JobStatus = Literal[tuple(s.value for s in models.JobStatus)]
     JobStage = Literal[tuple(s.value for s in models.JobStage)]
-# (u, v) pixels or (x, y) floor metres; JSON has no NaN/Infinity, and Python's "NaN" tokens are refused
-FinitePair = tuple[float, float]
+# the court specifications of app.calib.court.COURT_SPECS (a test keeps the two equal)
+CourtSpecName = Literal["wsf", "psa", "doubles"]
+# (u, v) pixels or (x, y) floor metres; JSON has no NaN/Infinity, and Python's "NaN" tokens are refused.
+# A list of two, not tuple[float, float]: that would be `prefixItems` in the schema, which many
+# OpenAPI tools cannot read.
+FinitePair = Annotated[list[float], Field(min_length=2, max_length=2)]
 
 
 class StrictModel(BaseModel):
@@ -36,19 +40,22 @@ class ErrorResponse(BaseModel):
 
 class CourtCreate(StrictModel):
     name: str = Field(min_length=1, max_length=200)
-    spec: str = Field(default="wsf", description="court specification: wsf, psa or doubles")
+    spec: CourtSpecName = Field(
+        default="wsf", description="court specification: wsf, psa or doubles"
+    )
 
 
 class CourtOut(BaseModel):
     id: str
     name: str
-    spec: str
+    spec: CourtSpecName
     active_calibration_id: str | None
     created_at: datetime
 
 
 class CourtList(BaseModel):
     courts: list[CourtOut]
+    next_offset: int | None = Field(description="`offset` of the next page; null on the last page")
 
 
 class JobAccepted(BaseModel):
@@ -232,7 +239,8 @@ class ImagePointsRequest(StrictModel):
 
 class ImagePointsResponse(BaseModel):
     pixels: list[FinitePair | None] = Field(
-        description="[u, v] pixels; null where the point is behind the camera"
+        description="[u, v] pixels; null where the point is behind the camera or beyond the "
+        "lens's usable field (past the fold of its distortion model)"
     )
     in_image: list[bool]
     calibration_id: str
@@ -244,5 +252,4 @@ class Health(BaseModel):
 
 class Ready(BaseModel):
     status: Literal["ready"]
-    database: str
     revision: str | None

@@ -12,9 +12,17 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="SQUASHCAL_", extra="ignore")
 
-    # Storage: the SQLite file and all media live under data_dir unless database_url says otherwise.
+    # Storage: the SQLite file and all media live under data_dir unless database_url and media_root
+    # say otherwise (media_root: a volume shared by every API and worker host, see the README).
     data_dir: Path = Path("./data")
     database_url: str | None = None
+    media_root: Path | None = None
+    # Media sweep (by every API process, at start and then every interval): uploads of failed jobs
+    # after the retention period, and job folders without a job (an upload cut off by a crash)
+    # once nothing has been written to them for the grace period.
+    failed_media_retention_s: float = Field(default=7 * 24 * 3600.0, ge=0)
+    orphan_media_grace_s: float = Field(default=3600.0, ge=0)
+    media_sweep_interval_s: float = Field(default=3600.0, gt=0)
 
     # HTTP server
     host: str = "127.0.0.1"
@@ -23,10 +31,15 @@ class Settings(BaseSettings):
     # Upload limits (checked while streaming / from headers before any full decode)
     max_upload_bytes: int = Field(default=512 * 1024 * 1024, ge=1)
     max_files: int = Field(default=32, ge=1)
-    max_image_pixels: int = Field(default=50_000_000, ge=1)
+    # pixels are counted from each image's header before anything is decoded: one 4096 x 4096
+    # image, and together 64 Mi pixels (32 full-HD frames), i.e. <= 200 MB of decoded BGR per job
+    max_image_pixels: int = Field(default=4096 * 4096, ge=1)
+    max_upload_pixels: int = Field(default=64 * 1024 * 1024, ge=1)
     max_video_width_px: int = Field(default=4096, ge=1)
     max_video_height_px: int = Field(default=4096, ge=1)
     max_video_duration_s: float = Field(default=900.0, gt=0)
+    # JSON bodies (everything but uploads) are read whole: 100 000 points fit in about 4 MB
+    max_json_body_bytes: int = Field(default=8 * 1024 * 1024, ge=1024)
     upload_chunk_bytes: int = Field(default=1024 * 1024, ge=1024)
 
     # Background: frames sampled from a clip, spread over its whole length
@@ -55,7 +68,6 @@ class Settings(BaseSettings):
     # Caches of the API process (the /project hot path does no database work)
     camera_refresh_s: float = Field(default=0.5, gt=0)
     camera_cache_size: int = Field(default=10_000, ge=1)
-    auth_cache_s: float = Field(default=30.0, ge=0)
 
     @model_validator(mode="after")
     def _lease_outlives_heartbeats(self) -> Settings:
@@ -67,7 +79,7 @@ class Settings(BaseSettings):
 
     @property
     def media_dir(self) -> Path:
-        return self.data_dir / "media"
+        return self.media_root if self.media_root is not None else self.data_dir / "media"
 
     @property
     def sqlalchemy_url(self) -> str:

@@ -127,7 +127,7 @@ def _write_clips(size: tuple[int, int], seconds: float, directory: Path) -> list
 def _measure(path: str, n_frames: int, old: bool, background_out: str) -> dict:
     """Run in a child process: one clip to background; timings, peak RSS and the shots."""
     from app.calib.background import background_from_clip, background_from_frames
-    from worker.media import sample_video_frames
+    from app.media.frames import sample_video_frames
 
     rss_after_imports = _peak_rss_mb()
     start = time.perf_counter()

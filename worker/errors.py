@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from sqlalchemy.exc import SQLAlchemyError
 
 from app.calib.pipeline import CourtNotFound
-from worker.media import MediaError
+from app.media import MediaError
 
 
 @dataclass(frozen=True)

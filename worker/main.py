@@ -29,13 +29,14 @@ import cv2
 import numpy as np
 from sqlalchemy import Engine
 
+from app import media
 from app.calib.background import ClipError, background_from_clip, background_from_frames
-from app.db import media, queue
+from app.db import queue
 from app.db.models import Calibration, JobStage, new_id
 from app.db.session import make_engine
+from app.media import MediaError, load_frames
 from app.settings import Settings
 from worker.errors import Failure, classify
-from worker.media import MediaError, load_frames
 
 log = logging.getLogger("squashcal.worker")
 T = TypeVar("T")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Depends
 
 from app.api import (
     calibrations,
@@ -10,6 +10,7 @@ from app.api import (
     court_jobs,
     courts,
     demo,
+    docs,
     health,
     jobs,
     me,
@@ -17,9 +18,10 @@ from app.api import (
     project,
     ui,
 )
+from app.api.deps import reject_unknown_query
 
-api_router = APIRouter()
-for module in (health, courts, calibrations, jobs, project, ui):
+api_router = APIRouter(dependencies=[Depends(reject_unknown_query)])
+for module in (health, courts, calibrations, jobs, project, ui, docs):
     api_router.include_router(module.router)
 # the browser page's resources (issue 7)
 for module in (me, court_jobs, cameras, pictures, demo):

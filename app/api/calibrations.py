@@ -9,12 +9,14 @@ from fastapi.responses import FileResponse, JSONResponse
 from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
+from app import media
 from app.api import uploads
 from app.api.deps import SessionDep, StateDep, TenantDep
 from app.api.errors import ApiError
 from app.api.serialize import calibration_out
-from app.db import media, repo
+from app.db import repo
 from app.db.models import Calibration, Court, new_id
+from app.media import probe
 from app.schemas import CalibrationOut, ErrorResponse, JobAccepted
 from app.settings import Settings
 
@@ -31,6 +33,7 @@ _UPLOAD_FORM: dict[str, Any] = {
                     "properties": {
                         "files": {
                             "type": "array",
+                            "minItems": 1,
                             "items": {"type": "string", "format": "binary"},
                             "description": "one or more PNG/JPEG images of the same fixed camera,"
                             " or one MP4/MOV/MKV/AVI/WebM clip (type read from the bytes)",
@@ -40,7 +43,7 @@ _UPLOAD_FORM: dict[str, Any] = {
                             "description": "optional start camera: a genome (15 numbers) or the "
                             'OpenCV JSON form {"K", "dist", "rvec", "tvec", "image_size"}',
                         },
-                        "seed": {"type": "integer", "minimum": 0},
+                        "seed": {"type": "integer", "minimum": 0, "maximum": 2**63 - 1},
                         "bundle": {"type": "string", "description": "GA operator bundle name"},
                     },
                 }
@@ -87,14 +90,15 @@ async def upload_calibration(
     # 404 or 429 before reading a byte of the body
     await run_in_threadpool(owned_court_with_room_in_the_queue)
     job_id = new_id()
-    target = media.job_dir(settings, job_id)
-    target.mkdir(parents=True)
+    store = media.media_store(settings)
+    target = store.create_job_dir(job_id)
     try:
         received = await uploads.receive_upload(request, target, settings)
-        summary = await run_in_threadpool(uploads.check_media, target, received.files, settings)
+        summary = await run_in_threadpool(probe.check_upload, target, received.files, settings)
         params = uploads.parse_job_params(received.fields, summary.image_size)
         params["image_size"] = list(summary.image_size)
-        await run_in_threadpool(media.fsync_tree, target)
+        # on disk (and on a shared volume, visible to every host) before the job exists
+        await run_in_threadpool(store.persist, target)
 
         def commit_job() -> None:
             with state.sessions.begin() as session:
@@ -112,7 +116,7 @@ async def upload_calibration(
 
         await run_in_threadpool(commit_job)
     except BaseException:
-        uploads.discard(target)
+        store.remove_job_dir(job_id)
         raise
     return JSONResponse(
         {"job_id": job_id, "status": "queued"},

@@ -166,23 +166,3 @@ class CameraCache:
                     log.info("camera cache: %d court camera(s) updated", changed)
             except Exception:
                 log.exception("camera cache refresh failed; retrying")
-
-
-class AuthCache:
-    """API key hash -> tenant id for `ttl_s` (revocations take effect within that time)."""
-
-    def __init__(self, ttl_s: float) -> None:
-        self.ttl_s = ttl_s
-        self._entries: dict[str, tuple[str, float]] = {}
-
-    def get(self, key_sha256: str) -> str | None:
-        hit = self._entries.get(key_sha256)
-        if hit is None or time.monotonic() > hit[1]:
-            return None
-        return hit[0]
-
-    def put(self, key_sha256: str, tenant_id: str) -> None:
-        if self.ttl_s > 0:
-            if len(self._entries) > 100_000:  # bounded: drop everything rather than grow forever
-                self._entries.clear()
-            self._entries[key_sha256] = (tenant_id, time.monotonic() + self.ttl_s)

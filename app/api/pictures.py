@@ -17,12 +17,13 @@ from fastapi import APIRouter, Query
 from fastapi.responses import Response
 from starlette.concurrency import run_in_threadpool
 
+from app import media
 from app.api.deps import SessionDep, StateDep, TenantDep
 from app.api.errors import ApiError
 from app.api.project import floor_points_response, image_points_response
 from app.calib import camera, render
 from app.calib.court import court_model, get_spec
-from app.db import media, repo
+from app.db import repo
 from app.db.models import Calibration, Job
 from app.schemas import (
     CourtLines,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 import orjson
 from fastapi import APIRouter
@@ -47,13 +49,13 @@ def _json(payload: dict[str, object]) -> Response:
     return Response(orjson.dumps(payload), media_type="application/json")
 
 
-def _as_array(pairs: list[tuple[float, float]]) -> np.ndarray:
+def _as_array(pairs: Sequence[Sequence[float]]) -> np.ndarray:
     return np.asarray(pairs, dtype=np.float64).reshape(-1, 2)
 
 
 def floor_points_response(
     genome: np.ndarray,
-    pixels: list[tuple[float, float]],
+    pixels: Sequence[Sequence[float]],
     court_size_m: tuple[float, float],
     calibration_id: str | None,
 ) -> Response:
@@ -79,12 +81,13 @@ def floor_points_response(
 
 def image_points_response(
     genome: np.ndarray,
-    points: list[tuple[float, float]],
+    points: Sequence[Sequence[float]],
     image_size: tuple[int, int],
     calibration_id: str | None,
 ) -> Response:
     """The ImagePointsResponse of floor `points` through `genome` (also used per calibration)."""
-    pixels = camera.floor_to_pixel(genome, _as_array(points))
+    # past the lens fold a floor point "projects" to a ghost pixel, often inside the picture
+    pixels = camera.floor_to_image_pixel(genome, _as_array(points))
     in_image = camera.pixels_in_image(pixels, image_size)
     return _json(
         {
@@ -109,7 +112,8 @@ def project(body: ProjectRequest, state: StateDep, tenant_id: TenantDep) -> Resp
 def image_points(
     court_id: str, body: ImagePointsRequest, state: StateDep, tenant_id: TenantDep
 ) -> Response:
-    """Floor (x, y) metres -> image pixels; null where the point is behind the camera."""
+    """Floor (x, y) metres -> image pixels; null where the point is behind the camera or beyond
+    the lens's usable field (past the fold of its distortion model)."""
     entry = state.cameras.get(tenant_id, court_id)
     genome = _calibrated(entry)
     assert entry.image_size is not None

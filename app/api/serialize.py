@@ -23,7 +23,7 @@ def court_out(court: Court) -> CourtOut:
     return CourtOut(
         id=court.id,
         name=court.name,
-        spec=court.spec,
+        spec=court.spec,  # type: ignore[arg-type]  # one of COURT_SPECS: only those are stored
         active_calibration_id=court.active_calibration_id,
         created_at=court.created_at,
     )

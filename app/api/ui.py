@@ -10,8 +10,9 @@ from fastapi.responses import FileResponse
 
 from app.api.deps import StateDep
 from app.api.errors import ApiError
+from app.api.security_headers import PAGE_CSP
 from app.calib.court import COURT_SPECS
-from app.db.media import IMAGE_TYPES, VIDEO_TYPES
+from app.media.sniff import IMAGE_TYPES, VIDEO_TYPES
 from app.schemas import PageConfig
 
 STATIC_DIR = Path(__file__).resolve().parents[1] / "static"
@@ -27,7 +28,11 @@ router = APIRouter(include_in_schema=False)
 
 @router.get("/")
 def index() -> FileResponse:
-    return FileResponse(STATIC_DIR / "index.html", media_type="text/html")
+    return FileResponse(
+        STATIC_DIR / "index.html",
+        media_type="text/html",
+        headers={"Content-Security-Policy": PAGE_CSP},
+    )
 
 
 @router.get("/static/{name}")

@@ -1,36 +1,29 @@
 """Receiving a calibration upload: stream the multipart body to disk with a running byte count,
-identify each file by its bytes, and check what can be checked before the job is queued.
+identify each file by its bytes and size each image from its header as soon as it is stored; the
+checks that need whole files are `app.media.probe.check_upload`.
 """
 
 from __future__ import annotations
 
 import json
-import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
-import cv2
 import numpy as np
 from fastapi import Request
 from python_multipart import MultipartParser
 from python_multipart.multipart import parse_options_header
 
 from app.api.errors import ApiError
-from app.db import media
+from app.media import probe, sniff
+from app.media.probe import MediaError, StoredFile
 from app.settings import Settings
 
 FILE_FIELD = "files"
 FORM_FIELDS = ("start_camera", "seed", "bundle")
 MAX_FORM_FIELD_BYTES = 64 * 1024
 MAX_SEED = 2**63 - 1
-
-
-@dataclass
-class StoredFile:
-    name: str  # file name inside the job directory
-    media_type: str
-    size_bytes: int
 
 
 @dataclass
@@ -69,6 +62,7 @@ class _Receiver:
         self.files: list[StoredFile] = []
         self.fields: dict[str, str] = {}
         self.total_file_bytes = 0
+        self.pixels = probe.PixelBudget(settings)
         self.part: _Part | None = None
         self._header_field = bytearray()
         self._header_value = bytearray()
@@ -137,10 +131,10 @@ class _Receiver:
                 "upload_too_large",
                 f"the upload exceeds the limit of {self.settings.max_upload_bytes} bytes",
             )
-        if len(part.head) < media.SNIFF_BYTES:
-            part.head += chunk[: media.SNIFF_BYTES - len(part.head)]
+        if len(part.head) < sniff.SNIFF_BYTES:
+            part.head += chunk[: sniff.SNIFF_BYTES - len(part.head)]
             # reject a wrong file type as soon as its signature is visible, not after the upload
-            if len(part.head) >= media.SNIFF_BYTES and media.sniff_type(part.head) is None:
+            if len(part.head) >= sniff.SNIFF_BYTES and sniff.sniff_type(part.head) is None:
                 raise _unsupported(len(self.files))
         assert part.handle is not None
         part.handle.write(chunk)
@@ -165,11 +159,15 @@ class _Receiver:
         index = len(self.files)
         if part.size == 0:
             raise ApiError(422, "empty_file", f"file #{index + 1} is empty (zero bytes)")
-        media_type = media.sniff_type(part.head)
+        media_type = sniff.sniff_type(part.head)
         if media_type is None:
             raise _unsupported(index)
-        name = f"{index:03d}.{media.EXTENSIONS[media_type]}"
-        part.tmp_path.rename(self.target_dir / name)
+        name = f"{index:03d}.{sniff.EXTENSIONS[media_type]}"
+        path = self.target_dir / name
+        part.tmp_path.rename(path)
+        if sniff.media_kind(media_type) == "images":
+            # from the header, before the next part is read: a bomb costs nothing but its bytes
+            self.pixels.add(probe.image_size(path, media_type, index, self.settings))
         self.files.append(StoredFile(name, media_type, part.size))
 
     def close_open_file(self) -> None:
@@ -207,6 +205,7 @@ async def receive_upload(request: Request, target_dir: Path, settings: Settings)
             "upload_too_large",
             f"the upload exceeds the limit of {settings.max_upload_bytes} bytes",
         )
+    _check_boundary(boundary)
     receiver = _Receiver(target_dir, settings)
     callbacks: Any = {
         name: getattr(receiver, name)
@@ -220,9 +219,9 @@ async def receive_upload(request: Request, target_dir: Path, settings: Settings)
             "on_headers_finished",
         )
     }
-    parser = MultipartParser(boundary, callbacks)
     received = 0
     try:
+        parser = MultipartParser(boundary, callbacks)
         async for chunk in request.stream():
             received += len(chunk)
             if received > _body_limit(settings):
@@ -233,7 +232,7 @@ async def receive_upload(request: Request, target_dir: Path, settings: Settings)
                 )
             parser.write(chunk)
         parser.finalize()
-    except ApiError:
+    except (ApiError, MediaError):
         raise
     except Exception as exc:  # the multipart parser's own errors: malformed body
         raise ApiError(422, "invalid_multipart", f"malformed multipart body: {exc}") from None
@@ -246,107 +245,30 @@ async def receive_upload(request: Request, target_dir: Path, settings: Settings)
     return ReceivedUpload(receiver.files, receiver.fields)
 
 
+# RFC 2046 section 5.1.1: 1 to 70 characters from this set, not ending with a space
+_BOUNDARY_CHARS = frozenset(
+    b"0123456789abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ'()+_,-./:=? "
+)
+MAX_BOUNDARY_CHARS = 70
+
+
+def _check_boundary(boundary: bytes) -> None:
+    """Refuse a boundary the RFC does not allow before the parser sees it (it raises on some)."""
+    if (
+        len(boundary) > MAX_BOUNDARY_CHARS
+        or boundary.endswith(b" ")
+        or not set(boundary) <= _BOUNDARY_CHARS
+    ):
+        raise ApiError(
+            422,
+            "invalid_multipart",
+            f"the multipart boundary must be 1 to {MAX_BOUNDARY_CHARS} letters, digits or "
+            "'()+_,-./:=? (RFC 2046)",
+        )
+
+
 def _body_limit(settings: Settings) -> int:
     return settings.max_upload_bytes + 64 * 1024 + 1024 * settings.max_files
-
-
-@dataclass(frozen=True)
-class MediaSummary:
-    kind: str  # "images" or "video"
-    image_size: tuple[int, int]  # (width, height)
-    duration_s: float | None = None
-
-
-def check_media(target_dir: Path, files: list[StoredFile], settings: Settings) -> MediaSummary:
-    """Checks that need the bytes on disk: decodable, within the pixel and frame limits, one size.
-
-    Blocking (decodes images, opens the video): run it in a thread pool.
-    """
-    kinds = {media.media_kind(f.media_type) for f in files}
-    if kinds == {"video"}:
-        if len(files) != 1:
-            raise ApiError(422, "too_many_videos", "upload one video clip, not several")
-        return _check_video(target_dir / files[0].name, settings)
-    if kinds != {"images"}:
-        raise ApiError(
-            422, "mixed_media", "upload either images or one video clip, not both together"
-        )
-    sizes: list[tuple[int, int]] = []
-    for i, f in enumerate(files):
-        sizes.append(_check_image(target_dir / f.name, f.media_type, i, settings))
-    if len(set(sizes)) > 1:
-        listed = ", ".join(f"#{i + 1}: {w}x{h}" for i, (w, h) in enumerate(sizes))
-        raise ApiError(
-            422,
-            "mixed_image_sizes",
-            f"all images must come from the same camera at the same size; got {listed}",
-        )
-    return MediaSummary("images", sizes[0])
-
-
-def _check_image(path: Path, media_type: str, index: int, settings: Settings) -> tuple[int, int]:
-    header = media.image_header(path, media_type)
-    if header is None or header.width <= 0 or header.height <= 0:
-        raise ApiError(
-            422, "corrupt_image", f"file #{index + 1} is not a readable {media_type} image"
-        )
-    if header.width * header.height > settings.max_image_pixels:
-        raise ApiError(
-            422,
-            "image_too_large",
-            f"file #{index + 1} is {header.width}x{header.height} pixels; the limit is "
-            f"{settings.max_image_pixels} pixels",
-        )
-    if not media.image_is_complete(path, media_type):
-        raise ApiError(
-            422, "corrupt_image", f"file #{index + 1} is truncated (the {media_type} has no end)"
-        )
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None or image.shape[:2] != (header.height, header.width):
-        raise ApiError(422, "corrupt_image", f"file #{index + 1} could not be decoded")
-    return header.width, header.height
-
-
-def _check_video(path: Path, settings: Settings) -> MediaSummary:
-    capture = cv2.VideoCapture(str(path))
-    try:
-        if not capture.isOpened():
-            raise ApiError(
-                422, "corrupt_video", "the video could not be opened (corrupt or truncated)"
-            )
-        width = int(capture.get(cv2.CAP_PROP_FRAME_WIDTH))
-        height = int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT))
-        if width > settings.max_video_width_px or height > settings.max_video_height_px:
-            raise ApiError(
-                422,
-                "video_frame_too_large",
-                f"video frames are {width}x{height}; the limit is "
-                f"{settings.max_video_width_px}x{settings.max_video_height_px}",
-            )
-        fps = capture.get(cv2.CAP_PROP_FPS)
-        n_frames = capture.get(cv2.CAP_PROP_FRAME_COUNT)
-        duration_s = float(n_frames / fps) if fps > 0 and n_frames > 0 else None
-        if duration_s is not None and duration_s > settings.max_video_duration_s:
-            raise ApiError(
-                422,
-                "video_too_long",
-                f"the clip lasts {duration_s:.0f} s; the limit is "
-                f"{settings.max_video_duration_s:.0f} s",
-            )
-        ok, frame = capture.read()
-        if not ok or frame is None or frame.size == 0:
-            raise ApiError(422, "video_no_frames", "the video has no decodable frame")
-        frame_h, frame_w = frame.shape[:2]
-        if frame_w > settings.max_video_width_px or frame_h > settings.max_video_height_px:
-            raise ApiError(
-                422,
-                "video_frame_too_large",
-                f"video frames are {frame_w}x{frame_h}; the limit is "
-                f"{settings.max_video_width_px}x{settings.max_video_height_px}",
-            )
-        return MediaSummary("video", (frame_w, frame_h), duration_s)
-    finally:
-        capture.release()
 
 
 def parse_job_params(fields: dict[str, str], image_size: tuple[int, int]) -> dict[str, Any]:
@@ -361,6 +283,11 @@ def parse_job_params(fields: dict[str, str], image_size: tuple[int, int]) -> dic
         except json.JSONDecodeError as exc:
             raise ApiError(
                 422, "invalid_start_camera", f"start_camera is not JSON: {exc}"
+            ) from None
+        except RecursionError:
+            # a camera is a flat list or a shallow object; thousands of nested brackets are not
+            raise ApiError(
+                422, "invalid_start_camera", "start_camera is nested too deeply to be a camera"
             ) from None
         except ValueError as exc:
             raise ApiError(422, "invalid_start_camera", f"start_camera: {exc}") from None
@@ -394,7 +321,3 @@ def parse_job_params(fields: dict[str, str], image_size: tuple[int, int]) -> dic
         except ValueError as exc:
             raise ApiError(422, "unknown_bundle", str(exc)) from None
     return params
-
-
-def discard(target_dir: Path) -> None:
-    shutil.rmtree(target_dir, ignore_errors=True)

@@ -326,6 +326,32 @@ def floor_to_pixel(
     return project_visible(genome, points)
 
 
+def in_lens_field(genome: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """bool (M,): court points (M, 3) in front of the camera and inside its lens fold.
+
+    Past the fold (`lens_fold_radius`) the distortion polynomial turns back and maps the point to
+    a pixel on the other side of the picture: that pixel is a ghost, not where the point appears.
+    """
+    g = as_population(genome)[0]
+    r, t = court_extrinsics(g)
+    cam = np.asarray(points, dtype=np.float64).reshape(-1, 3) @ r[0].T + t[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        radius2 = (cam[:, 0] ** 2 + cam[:, 1] ** 2) / cam[:, 2] ** 2
+    fold = lens_fold_radius(g)
+    return (cam[:, 2] > 1e-9) & (radius2 < fold * fold)
+
+
+def floor_to_image_pixel(
+    genome: np.ndarray, floor_xy_m: np.ndarray, plane_z_m: float = 0.0
+) -> np.ndarray:
+    """Like `floor_to_pixel`, but NaN also where the point lies beyond the lens fold."""
+    xy = np.asarray(floor_xy_m, dtype=np.float64).reshape(-1, 2)
+    points = np.column_stack([xy, np.full(len(xy), plane_z_m)])
+    pixels = project_visible(genome, points)
+    pixels[~in_lens_field(genome, points)] = np.nan
+    return pixels
+
+
 def pixels_in_image(pixels: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
     """bool (M,): finite pixels (M, 2) inside the image, which spans -0.5 .. size - 0.5 (pixel
     centres at integers)."""

@@ -33,6 +33,7 @@ from app.calib.court import COURT_SPECS, CourtModel, court_model, sample_edges
 from app.calib.fitness import population_fitness
 from app.calib.ga import DEFAULT_BUNDLE, GAResult, get_bundle, run_ga
 from app.calib.ga.engine import bundle_fitness_map
+from app.calib.limits import MIN_IMAGE_HEIGHT_PX, MIN_IMAGE_WIDTH_PX
 from app.calib.quality import Verdict
 
 ProgressFn = Callable[[str, float, dict[str, Any]], None]
@@ -143,7 +144,7 @@ def _validated_image(image: Any) -> np.ndarray:
     if arr.dtype != np.uint8:
         raise ValueError(f"image must be uint8, got {arr.dtype}")
     width, height = image_size_of(arr)
-    if width < 64 or height < 48:
+    if width < MIN_IMAGE_WIDTH_PX or height < MIN_IMAGE_HEIGHT_PX:
         raise ValueError(f"image is too small to calibrate: {width}x{height} px")
     return arr
 

@@ -47,3 +47,32 @@ def head_revision(settings: Settings) -> str | None:
 def current_revision(engine: Engine) -> str | None:
     with engine.connect() as conn:
         return MigrationContext.configure(conn).get_current_revision()
+
+
+def schema_problem(settings: Settings) -> str | None:
+    """Why the database cannot serve this code yet (a sentence saying what to run), else None.
+
+    Commands that read or write tables check this first, so a fresh data directory gets advice
+    instead of a SQLAlchemy traceback.
+    """
+    from sqlalchemy.engine import make_url
+
+    from app.db.session import make_engine
+
+    where = make_url(settings.sqlalchemy_url).render_as_string(hide_password=True)
+    engine = make_engine(settings)
+    try:
+        revision = current_revision(engine)
+    except Exception as exc:
+        return f"cannot reach the database at {where} ({type(exc).__name__}): is it running?"
+    finally:
+        engine.dispose()
+    head = head_revision(settings)
+    if revision is None:
+        return f"the database at {where} has no tables yet: run `squashcal migrate` first"
+    if revision != head:
+        return (
+            f"the database at {where} is at schema revision {revision}, this code needs {head}: "
+            "run `squashcal migrate` first"
+        )
+    return None

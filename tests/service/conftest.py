@@ -80,7 +80,7 @@ def make_settings(data_dir: Path, **overrides: object) -> Settings:
 
 @pytest.fixture
 def settings(tmp_path: Path) -> Settings:
-    s = make_settings(tmp_path / "data", camera_refresh_s=0.05, auth_cache_s=0.0)
+    s = make_settings(tmp_path / "data", camera_refresh_s=0.05)
     upgrade_head(s)
     return s
 

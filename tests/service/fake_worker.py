@@ -110,8 +110,8 @@ def _alive(pid: int) -> bool:
 
 
 def main() -> int:
+    from app import media
     from app.calib import pipeline
-    from app.db import media
     from app.settings import get_settings
     from app.viewer import pictures
     from worker import main as worker_main

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from app.calib import background, scene, synthetic
-from worker import media as worker_media
+from app.media import frames as worker_media
 
 SIZE = (480, 270)
 

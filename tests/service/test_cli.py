@@ -41,7 +41,7 @@ def test_migrate_and_manage_keys(tmp_path: Path) -> None:
     settings = make_settings(data_dir)
     engine = make_engine(settings)
     with make_sessionmaker(engine)() as session:
-        tenant_id = repo.tenant_for_key_hash(session, repo.hash_key(key))
+        tenant_id = repo.tenant_for_key(session, key)
         [row] = repo.list_api_keys(session)
     engine.dispose()
     assert tenant_id is not None and row.tenant_id == tenant_id
@@ -58,3 +58,14 @@ def test_migrate_and_manage_keys(tmp_path: Path) -> None:
     assert again.returncode == 1 and "no active key" in again.stderr
     unknown_tenant = squashcal(data_dir, "keys", "create", "--name", "x", "--tenant", "nope")
     assert unknown_tenant.returncode == 1 and "no tenant" in unknown_tenant.stderr
+
+
+def test_commands_on_a_never_migrated_data_dir_say_what_to_run(tmp_path: Path) -> None:
+    data_dir = tmp_path / "fresh"
+    for args in (("keys", "list"), ("keys", "create", "--name", "x"), ("worker", "--once")):
+        result = squashcal(data_dir, *args)
+        assert result.returncode == 2, (args, result.stdout, result.stderr)
+        assert "run `squashcal migrate` first" in result.stderr
+        assert "Traceback" not in result.stderr and "sqlalchemy" not in result.stderr.lower()
+    assert squashcal(data_dir, "migrate").returncode == 0
+    assert squashcal(data_dir, "keys", "list").returncode == 0

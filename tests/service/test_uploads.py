@@ -119,7 +119,7 @@ def test_corrupt_image_body(client: httpx.Client, auth: dict[str, str], settings
     assert_rejected_and_nothing_kept(response, settings, 422, "corrupt_image")
 
 
-def _png_with_header_size(width: int, height: int) -> bytes:
+def png_with_header_size(width: int, height: int) -> bytes:
     """A PNG whose IHDR claims width x height, with a tiny (inconsistent) body: a bomb's header."""
     ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
     chunk = b"IHDR" + ihdr
@@ -135,7 +135,7 @@ def test_decompression_bomb_rejected_from_header(
     client: httpx.Client, auth: dict[str, str], settings: Settings
 ) -> None:
     court_id = make_court(client, auth)
-    bomb = _png_with_header_size(100_000, 100_000)  # 10 gigapixels claimed in ~1 kB
+    bomb = png_with_header_size(100_000, 100_000)  # 10 gigapixels claimed in ~1 kB
     response = upload(client, auth, court_id, files(bomb))
     assert_rejected_and_nothing_kept(response, settings, 422, "image_too_large")
 
@@ -223,7 +223,7 @@ def test_upload_size_limit_is_413_and_keeps_nothing(tmp_path: Path) -> None:
     auth = {"Authorization": f"Bearer {new_key(settings)}"}
     with api_client(create_app(settings)) as client:
         court_id = make_court(client, auth)
-        small = png_bytes(40, 40)
+        small = png_bytes(64, 64)
         assert len(small) < 20_000
         assert upload(client, auth, court_id, files(small)).status_code == 202
         big = png_bytes(200, 200)  # noise does not compress: ~120 kB
@@ -232,7 +232,7 @@ def test_upload_size_limit_is_413_and_keeps_nothing(tmp_path: Path) -> None:
         assert_error(response, 413, "upload_too_large")
         # several files that are each small but together too large
         response = upload(
-            client, auth, court_id, files(*[png_bytes(60, 60, seed=s) for s in range(3)])
+            client, auth, court_id, files(*[png_bytes(64, 48, seed=s) for s in range(3)])
         )
         assert_error(response, 413, "upload_too_large")
     assert len(jobs_in_db(settings)) == 1

@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 from sqlalchemy import select
 
+from app import media
 from app.calib import camera, scene, synthetic
-from app.db import media, queue
+from app.db import queue
 from app.db.migrate import upgrade_head
 from app.db.models import Calibration
 from app.db.session import make_engine, make_sessionmaker

@@ -15,12 +15,12 @@ from app.db import queue
 from app.db.migrate import upgrade_head
 from app.db.models import JobStatus, utcnow
 from app.db.session import make_engine
+from app.media import MediaError
 from app.settings import Settings
 from tests.service.conftest import make_settings
 from tests.service.test_queue import add_jobs, job_row
 from worker import main as worker_main
 from worker.errors import classify
-from worker.media import MediaError
 
 
 def db_down() -> OperationalError:

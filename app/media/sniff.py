@@ -1,17 +1,12 @@
-"""Stored media: where uploads and calibration images live, and what a file is by its bytes.
-
-Layout under `settings.media_dir`: `jobs/<job id>/<n>.<ext>` (the upload, kept), and
-`calibrations/<calibration id>/{background,overlay}.png`.
+"""What a file is, from its bytes: its media type from the first bytes, an image's size from its
+header. Nothing here decodes pixels, so it is safe on any upload before any limit is checked.
 """
 
 from __future__ import annotations
 
-import os
 import struct
 from dataclasses import dataclass
 from pathlib import Path
-
-from app.settings import Settings
 
 IMAGE_TYPES = ("png", "jpeg")
 VIDEO_TYPES = ("mp4", "mov", "mkv", "webm", "avi")
@@ -27,14 +22,6 @@ EXTENSIONS = {
 }
 # ISO base media top-level boxes that may come first in a QuickTime/MP4 file
 _ISO_BOXES = (b"ftyp", b"moov", b"mdat", b"wide", b"free", b"skip", b"pnot")
-
-
-def job_dir(settings: Settings, job_id: str) -> Path:
-    return settings.media_dir / "jobs" / job_id
-
-
-def calibration_dir(settings: Settings, calibration_id: str) -> Path:
-    return settings.media_dir / "calibrations" / calibration_id
 
 
 def sniff_type(head: bytes) -> str | None:
@@ -120,17 +107,3 @@ def image_is_complete(path: Path, media_type: str) -> bool:
     if media_type == "png":
         return b"IEND" in tail
     return b"\xff\xd9" in tail.rstrip(b"\x00")[-16:]
-
-
-def fsync_tree(directory: Path) -> None:
-    """Flush the files of `directory` and the directory entries themselves to stable storage."""
-    for path in directory.iterdir():
-        if path.is_file():
-            with path.open("rb") as f:
-                os.fsync(f.fileno())
-    for d in (directory, directory.parent):
-        fd = os.open(d, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)

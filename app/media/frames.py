@@ -1,4 +1,4 @@
-"""A job's stored upload -> frames for the background estimate."""
+"""A job's stored upload -> frames for the background estimate (the worker's side of media)."""
 
 from __future__ import annotations
 
@@ -7,21 +7,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from app.db import media
+from app.media import probe, store
+from app.media.probe import MediaError
 from app.settings import Settings
 
 # Without a usable frame count (some WebM/MKV files), read sequentially but keep memory bounded:
 # keep every `stride`-th frame and double the stride whenever the buffer fills.
 SEQUENTIAL_READ_CAP_FRAMES = 100_000
-
-
-class MediaError(Exception):
-    """The stored upload cannot be used; `code` is the job's error code."""
-
-    def __init__(self, code: str, message: str) -> None:
-        super().__init__(message)
-        self.code = code
-        self.message = message
 
 
 def frame_indices(n_frames: int, n_samples: int) -> np.ndarray:
@@ -94,24 +86,22 @@ def _read_sequentially(
     return kept
 
 
-def load_images(paths: list[Path], max_pixels: int) -> list[np.ndarray]:
+def load_images(paths: list[Path], settings: Settings) -> list[np.ndarray]:
+    """Every image of an upload, after the same header checks as at upload (sizes, pixel budget):
+    nothing is decoded until the whole upload is known to fit, then one image at a time."""
+    sizes = probe.checked_image_sizes(paths, settings)
     frames = []
     for i, path in enumerate(paths):
-        header = media.image_header(path, "png" if path.suffix == ".png" else "jpeg")
-        if header is None or header.width * header.height > max_pixels:
-            raise MediaError("corrupt_image", f"image #{i + 1} cannot be read safely")
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if image is None:
-            raise MediaError("corrupt_image", f"image #{i + 1} could not be decoded")
+        image = probe.decode_image(path, i)
+        if image.shape[:2] != (sizes[i][1], sizes[i][0]):
+            raise MediaError("corrupt_image", f"image #{i + 1} does not match its header")
         frames.append(image)
-    if len({f.shape for f in frames}) > 1:
-        raise MediaError("mixed_image_sizes", "the images do not all have the same size")
     return frames
 
 
 def load_frames(settings: Settings, job_id: str, kind: str, files: list[str]) -> list[np.ndarray]:
     """The job's frames: every uploaded image, or frames sampled over the clip."""
-    directory = media.job_dir(settings, job_id)
+    directory = store.job_dir(settings, job_id)
     paths = [directory / name for name in files]
     missing = [p.name for p in paths if not p.is_file()]
     if missing:
@@ -123,4 +113,4 @@ def load_frames(settings: Settings, job_id: str, kind: str, files: list[str]) ->
             settings.max_video_duration_s,
             (settings.max_video_width_px, settings.max_video_height_px),
         )
-    return load_images(paths, settings.max_image_pixels)
+    return load_images(paths, settings)

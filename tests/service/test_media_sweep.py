@@ -1,0 +1,102 @@
+"""The media sweep: uploads of failed jobs after the retention period, and orphan job folders."""
+
+from __future__ import annotations
+
+import os
+import time
+from datetime import timedelta
+from pathlib import Path
+
+from sqlalchemy import update
+
+from app.db import repo
+from app.db.migrate import upgrade_head
+from app.db.models import Job, new_id, utcnow
+from app.db.session import make_engine, make_sessionmaker
+from app.main import create_app
+from app.media.store import media_store
+from app.media.sweep import sweep_media
+from app.settings import Settings
+from tests.service.conftest import api_client, make_settings
+
+DAY_S = 24 * 3600.0
+
+
+def _job_with_upload(settings: Settings, sessions, court_id: str, tenant_id: str) -> str:
+    job_id = new_id()
+    folder = media_store(settings).create_job_dir(job_id)
+    (folder / "000.png").write_bytes(b"stored upload")
+    with sessions.begin() as session:
+        repo.new_job(
+            session,
+            job_id=job_id,
+            tenant_id=tenant_id,
+            court_id=court_id,
+            media_kind="images",
+            media_files=["000.png"],
+            params={},
+            max_attempts=1,
+        )
+    return job_id
+
+
+def _set_status(sessions, job_id: str, status: str, finished_days_ago: float) -> None:
+    with sessions.begin() as session:
+        session.execute(
+            update(Job)
+            .where(Job.id == job_id)
+            .values(status=status, finished_at=utcnow() - timedelta(days=finished_days_ago))
+        )
+
+
+def _orphan(settings: Settings, age_s: float) -> str:
+    orphan_id = new_id()
+    folder = media_store(settings).create_job_dir(orphan_id)
+    part = folder / "part000.tmp"
+    part.write_bytes(b"half an upload")
+    then = time.time() - age_s
+    for path in (part, folder):
+        os.utime(path, (then, then))
+    return orphan_id
+
+
+def test_sweep_removes_old_failed_uploads_and_quiet_orphans_only(tmp_path: Path) -> None:
+    settings = make_settings(
+        tmp_path / "data", failed_media_retention_s=2 * DAY_S, orphan_media_grace_s=3600
+    )
+    upgrade_head(settings)
+    engine = make_engine(settings)
+    sessions = make_sessionmaker(engine)
+    with sessions.begin() as session:
+        key_row, _ = repo.create_api_key(session, name="t")
+        court = repo.create_court(session, key_row.tenant_id, "c", "wsf")
+        tenant_id, court_id = key_row.tenant_id, court.id
+    old_failure = _job_with_upload(settings, sessions, court_id, tenant_id)
+    _set_status(sessions, old_failure, "failed", finished_days_ago=3)
+    recent_failure = _job_with_upload(settings, sessions, court_id, tenant_id)
+    _set_status(sessions, recent_failure, "failed", finished_days_ago=1)
+    old_success = _job_with_upload(settings, sessions, court_id, tenant_id)
+    _set_status(sessions, old_success, "succeeded", finished_days_ago=30)
+    queued = _job_with_upload(settings, sessions, court_id, tenant_id)
+    crashed_upload = _orphan(settings, age_s=2 * 3600)
+    upload_in_progress = _orphan(settings, age_s=60)
+
+    report = sweep_media(media_store(settings), sessions, settings)
+    engine.dispose()
+
+    assert (report.failed_uploads_removed, report.orphans_removed) == (1, 1)
+    left = {d.job_id for d in media_store(settings).job_dirs()}
+    assert left == {recent_failure, old_success, queued, upload_in_progress}
+    assert crashed_upload not in left and old_failure not in left
+
+
+def test_api_sweeps_orphans_at_start(tmp_path: Path) -> None:
+    settings = make_settings(tmp_path / "data", orphan_media_grace_s=10)
+    upgrade_head(settings)
+    crashed_upload = _orphan(settings, age_s=60)
+    with api_client(create_app(settings)) as client:
+        deadline = time.monotonic() + 10
+        while media_store(settings).job_dir(crashed_upload).exists():
+            assert time.monotonic() < deadline, "the startup sweep did not remove the orphan"
+            time.sleep(0.05)
+        assert client.get("/healthz").status_code == 200
