@@ -12,7 +12,7 @@ from fastapi.responses import FileResponse
 from starlette.concurrency import run_in_threadpool
 
 from app.api.deps import StateDep, TenantDep
-from app.calib import synthetic
+from app.calib import scene, synthetic
 from app.schemas import ErrorResponse
 
 router = APIRouter(tags=["demo"])
@@ -30,10 +30,10 @@ def demo_clip_path(media_dir: Path) -> Path:
         return path
     path.parent.mkdir(parents=True, exist_ok=True)
     genome = synthetic.typical_target_camera(DEMO_SIZE)
-    frames = synthetic.render_clip_frames(genome, DEMO_SIZE, DEMO_FRAMES, DEMO_SEED, n_players=2)
+    frames = scene.render_clip_frames(genome, DEMO_SIZE, DEMO_FRAMES, DEMO_SEED, n_players=2)
     partial = path.with_name(f".{uuid.uuid4().hex}.mp4")
     try:
-        synthetic.write_video(frames, partial)
+        scene.write_video(frames, partial)
         os.replace(partial, path)
     finally:
         partial.unlink(missing_ok=True)
