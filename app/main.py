@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import threading
 from collections.abc import AsyncIterator
 
 from fastapi import FastAPI
@@ -20,7 +21,9 @@ from app.settings import Settings, get_settings
 log = logging.getLogger("squashcal.api")
 
 
-def create_app(settings: Settings | None = None) -> FastAPI:
+def create_app(settings: Settings | None = None, warm_up: bool = False) -> FastAPI:
+    """The API. `warm_up`: load the numerical kernels in a thread at start, /readyz saying 503
+    `warming_up` until they are (`squashcal serve` does; in-process test apps need not)."""
     settings = settings or get_settings()
     engine = make_engine(settings)
     sessions = make_sessionmaker(engine)
@@ -36,6 +39,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         refresher = asyncio.create_task(state.cameras.run_refresher())
+        if warm_up:
+            # a thread, not the event loop: /healthz answers while the kernels load
+            threading.Thread(
+                target=_warm_kernels, args=(state,), name="warm-up", daemon=True
+            ).start()
+        else:
+            state.kernels_ready.set()
         try:
             yield
         finally:
@@ -57,3 +67,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     install_error_handlers(app)
     app.include_router(api_router)
     return app
+
+
+def _warm_kernels(state: AppState) -> None:
+    from app.calib import warmup
+
+    try:
+        warmup.warm_up(warmup.API_PARTS)
+    except Exception:  # a failed warm-up only means the first request compiles: still serve
+        log.exception("warm-up of the numerical kernels failed")
+    state.kernels_ready.set()

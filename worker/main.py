@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 from sqlalchemy import Engine
 
+from app.calib import warmup
 from app.calib.background import ClipError, background_from_clip, background_from_frames
 from app.db import media, queue
 from app.db.models import Calibration, new_id
@@ -350,6 +351,8 @@ def run_worker(settings: Settings, once: bool = False, worker_id: str | None = N
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
+    if settings.warm_up:  # before the first claim, so that no job pays the kernels' compile
+        warmup.warm_up(warmup.WORKER_PARTS)
     engine = make_engine(settings)
     log.info("worker %s polling %s", worker_id, engine.url.render_as_string(hide_password=True))
     try:
