@@ -49,9 +49,13 @@ def warm_projection() -> None:
     from app.calib.court import court_model
 
     genome, photo, _ = _court_pictures()
-    pixels = np.array([[10.0, 20.0], [64.0, 60.0]])
-    camera.pixel_to_floor(genome, pixels)
-    camera.floor_to_pixel(genome, np.array([[3.2, 5.0]]))
+    # the API's camera cache hands out read-only genomes, which numba compiles apart from
+    # writable ones (the pictures' genomes come from the database, writable)
+    read_only = genome.copy()
+    read_only.setflags(write=False)
+    for g in (genome, read_only):
+        camera.pixel_to_floor(g, np.array([[10.0, 20.0], [64.0, 60.0]]))
+        camera.floor_to_pixel(g, np.array([[3.2, 5.0]]))
     render.court_polylines(genome, court_model("wsf"))
     pipeline.evidence_image(photo)
 
