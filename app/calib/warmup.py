@@ -44,11 +44,12 @@ def _court_pictures() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def warm_projection() -> None:
     """The API's kernels: pixels <-> floor (`/project`, `/image-points`) and the court drawing of
-    its pictures (overlay, edges)."""
-    from app.calib import camera, pipeline, render
+    its pictures. Not the line evidence: the API only extracts it for calibrations stored before
+    the worker kept it (`edges.png`); compiling it would delay readiness when the cache is empty."""
+    from app.calib import camera, render
     from app.calib.court import court_model
 
-    genome, photo, _ = _court_pictures()
+    genome, _, _ = _court_pictures()
     # the API's camera cache hands out read-only genomes, which numba compiles apart from
     # writable ones (the pictures' genomes come from the database, writable)
     read_only = genome.copy()
@@ -57,7 +58,6 @@ def warm_projection() -> None:
         camera.pixel_to_floor(g, np.array([[10.0, 20.0], [64.0, 60.0]]))
         camera.floor_to_pixel(g, np.array([[3.2, 5.0]]))
     render.court_polylines(genome, court_model("wsf"))
-    pipeline.evidence_image(photo)
 
 
 def warm_calibration() -> None:
