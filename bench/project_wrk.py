@@ -138,9 +138,8 @@ def main() -> None:
             run_wrk(url + "/project", args, scripts[1], duration_s=2)
             rows.append((f"GET {BARE_PATH} (bare)", run_wrk(url + BARE_PATH, args)))
             for n in (1, 1000):
-                rows.append(
-                    (f"POST /project, {n} point(s)", run_wrk(url + "/project", args, scripts[n]))
-                )
+                label = f"POST /project, {n} point{'s' if n > 1 else ''}"
+                rows.append((label, run_wrk(url + "/project", args, scripts[n])))
         finally:
             server.terminate()
             server.wait(30)
