@@ -72,8 +72,5 @@ def create_app(settings: Settings | None = None, warm_up: bool = False) -> FastA
 def _warm_kernels(state: AppState) -> None:
     from app.calib import warmup
 
-    try:
-        warmup.warm_up(warmup.API_PARTS)
-    except Exception:  # a failed warm-up only means the first request compiles: still serve
-        log.exception("warm-up of the numerical kernels failed")
+    warmup.warm_up_best_effort(warmup.API_PARTS)
     state.kernels_ready.set()

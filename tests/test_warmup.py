@@ -33,3 +33,13 @@ def test_a_job_after_the_warm_ups_compiles_nothing_new() -> None:
 def test_unknown_warm_up_is_refused() -> None:
     with pytest.raises(KeyError):
         warmup.warm_up(("nope",))
+
+
+def test_a_failed_warm_up_does_not_stop_a_service(monkeypatch: pytest.MonkeyPatch) -> None:
+    def broken() -> None:
+        raise RuntimeError("no compiler today")
+
+    monkeypatch.setitem(warmup.WARM_UPS, "broken", broken)
+    with pytest.raises(RuntimeError):
+        warmup.warm_up(("broken",))  # the image build must fail
+    warmup.warm_up_best_effort(("broken",))  # a starting service logs it and serves

@@ -352,7 +352,7 @@ def run_worker(settings: Settings, once: bool = False, worker_id: str | None = N
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
     if settings.warm_up:  # before the first claim, so that no job pays the kernels' compile
-        warmup.warm_up(warmup.WORKER_PARTS)
+        warmup.warm_up_best_effort(warmup.WORKER_PARTS)
     engine = make_engine(settings)
     log.info("worker %s polling %s", worker_id, engine.url.render_as_string(hide_password=True))
     try:

@@ -109,6 +109,15 @@ def warm_up(parts: tuple[str, ...]) -> dict[str, float]:
     return seconds
 
 
+def warm_up_best_effort(parts: tuple[str, ...]) -> None:
+    """`warm_up` for a service starting: a failure is logged, not raised (then the first request
+    or job compiles what is missing; the service still serves)."""
+    try:
+        warm_up(parts)
+    except Exception:
+        log.exception("warm-up of the numerical kernels failed")
+
+
 def compiled_signatures() -> dict[str, set[str]]:
     """Every numba kernel of app.calib -> the argument types it has been compiled for here."""
     from numba.core.registry import CPUDispatcher
