@@ -14,7 +14,6 @@ BASE_IMAGE="${BASE_IMAGE:-squashcal-base:bookworm}"
 IMAGE="${IMAGE:-squashcal:check}"
 PORT="${PORT:-18000}"
 NAME="squashcal-check-$$"
-PY="${PY:-$( [ -x .venv/bin/python ] && echo .venv/bin/python || echo python3)}"
 
 log() { printf '\n== %s\n' "$*"; }
 
