@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test lint bench bench-speed bench-protocol bench-real clean
+.PHONY: run test lint bench bench-speed bench-protocol bench-real docker-check clean
 
 # The browser tests drive Debian's Chromium (no browser download): installed when missing.
 CHROMIUM := /usr/bin/chromium
@@ -44,6 +44,11 @@ bench-protocol: $(STAMP)
 #   make bench-real DATA=../shared/data/dev
 bench-real: $(STAMP)
 	$(BIN)/python -m bench.real $(DATA)
+
+# Build the Docker image (on a base made from Debian packages when the registry is out of reach),
+# run api + worker containers, calibrate a rendered clip, ask /project. Minutes; not in .ci/run.
+docker-check:
+	docker/check.sh
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

@@ -75,7 +75,7 @@ def _serve(settings: Settings, host: str | None, port: int | None) -> int:
     from app.main import create_app
 
     uvicorn.run(
-        create_app(settings),
+        create_app(settings, warm_up=settings.warm_up),
         host=host or settings.host,
         port=port or settings.port,
         log_level="info",

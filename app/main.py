@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import threading
 from collections.abc import AsyncIterator
 
 from fastapi import FastAPI
@@ -46,7 +47,9 @@ def error_schemas() -> dict[str, object]:
     return dict(top["$defs"])
 
 
-def create_app(settings: Settings | None = None) -> FastAPI:
+def create_app(settings: Settings | None = None, warm_up: bool = False) -> FastAPI:
+    """The API. `warm_up`: load the numerical kernels in a thread at start, /readyz saying 503
+    `warming_up` until they are (`squashcal serve` does; in-process test apps need not)."""
     settings = settings or get_settings()
     engine = make_engine(settings)
     sessions = make_sessionmaker(engine)
@@ -63,6 +66,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         refresher = asyncio.create_task(state.cameras.run_refresher())
         sweeper = asyncio.create_task(_sweep_media_forever(settings, sessions))
+        if warm_up:
+            # a thread, not the event loop: /healthz answers while the kernels load
+            threading.Thread(
+                target=_warm_kernels, args=(state,), name="warm-up", daemon=True
+            ).start()
+        else:
+            state.kernels_ready.set()
         try:
             yield
         finally:
@@ -91,3 +101,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(api_router)
     install_openapi(app, error_schemas())
     return app
+
+
+def _warm_kernels(state: AppState) -> None:
+    from app.calib import warmup
+
+    warmup.warm_up_best_effort(warmup.API_PARTS)
+    state.kernels_ready.set()

@@ -65,6 +65,10 @@ class Settings(BaseSettings):
     ga_time_budget_s: float | None = Field(default=None, gt=0)
     ga_max_generations: int | None = Field(default=None, ge=1)
 
+    # Load the numerical kernels at start, before taking work (`app.calib.warmup`): the API's
+    # /readyz and the worker's first claim wait for it. Off: the first request or job pays it.
+    warm_up: bool = True
+
     # Caches of the API process (the /project hot path does no database work)
     camera_refresh_s: float = Field(default=0.5, gt=0)
     camera_cache_size: int = Field(default=10_000, ge=1)

@@ -67,6 +67,26 @@ def seed_database(settings: Settings, genome: np.ndarray) -> tuple[str, str]:
     return key, court_id
 
 
+def free_port() -> int:
+    """A loopback port free right now (for a server started next)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_ready(url: str, timeout_s: float) -> None:
+    """Until GET {url}/readyz answers 200 (the server started, migrated, its kernels loaded)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            if httpx.get(f"{url}/readyz", timeout=5).status_code == 200:
+                return
+        except httpx.TransportError:
+            pass
+        time.sleep(0.05)
+    raise TimeoutError(f"{url} not ready after {timeout_s} s")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=30)
@@ -76,9 +96,7 @@ def main() -> None:
         settings = Settings(data_dir=Path(tmp))
         upgrade_head(settings)
         key, court_id = seed_database(settings, genome)
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            port = s.getsockname()[1]
+        port = free_port()
         env = {**os.environ, "SQUASHCAL_DATA_DIR": tmp}
         server = subprocess.Popen(
             [sys.executable, "-m", "app.cli", "serve", "--port", str(port)],
@@ -88,12 +106,7 @@ def main() -> None:
         )
         try:
             url = f"http://127.0.0.1:{port}"
-            for _ in range(100):
-                try:
-                    if httpx.get(f"{url}/readyz", timeout=1).status_code == 200:
-                        break
-                except httpx.TransportError:
-                    time.sleep(0.2)
+            wait_ready(url, 120)
             rng = np.random.default_rng(0)
             headers = {"Authorization": f"Bearer {key}"}
             print(f"{'points':>8} {'median ms':>10} {'p95 ms':>8} {'points/s':>12}")

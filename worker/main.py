@@ -30,6 +30,7 @@ import numpy as np
 from sqlalchemy import Engine
 
 from app import media
+from app.calib import warmup
 from app.calib.background import ClipError, background_from_clip, background_from_frames
 from app.db import queue
 from app.db.models import Calibration, JobStage, new_id
@@ -424,6 +425,8 @@ def run_worker(settings: Settings, once: bool = False, worker_id: str | None = N
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
+    if settings.warm_up:  # before the first claim, so that no job pays the kernels' compile
+        warmup.warm_up_best_effort(warmup.WORKER_PARTS)
     engine = make_engine(settings)
     log.info("worker %s polling %s", worker_id, engine.url.render_as_string(hide_password=True))
     try:

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Annotated, Any
 
 from fastapi import Depends, Request
@@ -25,6 +26,8 @@ class AppState:
     cameras: CameraCache
     keys: repo.KeyLookup
     head_revision: str | None
+    # set once the numerical kernels are compiled or loaded (`app.calib.warmup`); /readyz waits
+    kernels_ready: threading.Event = field(default_factory=threading.Event)
 
 
 def get_state(request: Request) -> AppState:

@@ -21,7 +21,10 @@ def healthz() -> Health:
 
 @router.get("/readyz", response_model=Ready)
 async def readyz(state: StateDep) -> Ready:
-    """The database answers and its schema is at the migrations' head."""
+    """The database answers, its schema is at the migrations' head, and the numerical kernels
+    are loaded (so that no request pays their compile)."""
+    if not state.kernels_ready.is_set():
+        raise ApiError(503, "warming_up", "loading the numerical kernels; ready in a few seconds")
     try:
         revision = await run_in_threadpool(current_revision, state.engine)
     except Exception:
