@@ -39,6 +39,7 @@ const ADVICE = {
   too_many_pixels: "The photos are too big together. Send fewer photos (a handful is enough) or smaller ones.",
   no_files: "No file arrived. Pick a clip or photos.",
   media_missing: "The uploaded files went missing on the server. Upload them again.",
+  no_static_view: "The clip never holds one view of the court for a second (cuts, zooms or a moving camera). Re-film with the camera fixed, or send a still frame.",
   court_not_found: "We could not find the court's lines. Re-film with the camera still, the whole floor and the front wall in view, the lights on and the lens clean.",
   worker_lost: "The calibration stopped half way on our side. Upload the same footage again.",
   calibration_error: "Something went wrong on our side while calibrating. Try again; if it keeps failing, tell your service operator.",

@@ -18,7 +18,7 @@ import httpx
 import numpy as np
 import pytest
 
-from app.calib import camera
+from app.calib import camera, cases
 from tests import renderer
 from tests.browser.conftest import Session, open_page
 
@@ -38,10 +38,12 @@ def clip_file(tmp_path: Path, genome: np.ndarray, seed: int) -> Path:
 
 
 def blank_clip(tmp_path: Path) -> Path:
-    """A clip with no court in it (a smooth grey ramp: no lines at all)."""
-    ramp = np.tile(np.linspace(60, 200, SIZE[0], dtype=np.uint8)[None, :, None], (SIZE[1], 1, 3))
+    """A clip of a static view with no court in it (a room the benchmark uses as a negative),
+    long enough (1.6 s) to give a background: the calibration itself must refuse it."""
+    room = cases.make_negative("room", 1000).image
+    frame = cv2.resize(room, SIZE, interpolation=cv2.INTER_AREA)
     path = tmp_path / "no-court.mp4"
-    renderer.write_video([ramp] * 10, path)
+    renderer.write_video([frame] * 40, path)
     return path
 
 
