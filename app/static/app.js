@@ -103,6 +103,11 @@ async function errorOf(response) {
   return new ApiError(response.status, code, message);
 }
 
+// the line search finds the camera; the paper's GA runs only when an upload names a bundle
+function howFound(cal) {
+  return cal.generations ? `GA, seed ${cal.seed}, ${cal.generations} generations` : "found from the court's lines";
+}
+
 function explain(error) {
   const advice = ADVICE[error.code];
   return advice ? `${advice}\n(${error.message})` : error.message || String(error);
@@ -531,7 +536,7 @@ function historyItem(cal) {
     { class: state.viewing?.id === cal.id ? "viewing" : "", "data-id": cal.id },
     thumb,
     el("div", {}, cal.active ? el("span", { class: "badge active", text: "Active" }) : null, el("span", { class: `badge ${verdict.label}`, text: verdict.words })),
-    el("div", { class: "meta", text: `${when(cal.created_at)} · ${cal.source === "import" ? "imported" : `${cal.generations ?? "?"} generations`}` }),
+    el("div", { class: "meta", text: `${when(cal.created_at)} · ${cal.source === "import" ? "imported" : howFound(cal)}` }),
     el("div", { class: "actions" }, viewButton, activeButton),
   );
 }
@@ -654,7 +659,7 @@ function showCamera(cal) {
     ["Looking", `pan ${fmt(p.pan_deg, 1)}° (0 = at the front wall, + = to the right), tilt ${fmt(p.tilt_deg, 1)}° down, roll ${fmt(p.roll_deg, 1)}°`],
     ["Field of view", `${fmt(p.fov_deg[0], 1)}° × ${fmt(p.fov_deg[1], 1)}°`],
     ["rvec / tvec", `${cal.opencv.rvec.map((v) => fmt(v, 4)).join(", ")} / ${cal.opencv.tvec.map((v) => fmt(v, 3)).join(", ")}`],
-    ["Made", `${when(cal.created_at)}${cal.source === "import" ? " (imported)" : `, seed ${cal.seed}, ${cal.generations} generations`}`],
+    ["Made", `${when(cal.created_at)}${cal.source === "import" ? " (imported)" : `, ${howFound(cal)}`}`],
     ["Calibration id", cal.id],
   ];
   $("camera-table").replaceChildren(...rows.map(([k, v]) => el("tr", {}, el("th", { text: k }), el("td", { text: v }))));
