@@ -506,9 +506,15 @@ async function refreshCourtNames() {
 // ------------------------------------------------------------------------------------------
 // history
 
+// Several loads can be in flight (a job finishing, "Make active"): answers may come back out of
+// order, and an older one must not paint over a newer one (a stale "Active" badge).
+let historyRequests = 0;
+
 async function loadHistory() {
   if (!state.courtId) return;
+  const ticket = ++historyRequests;
   const { calibrations } = await api(`/courts/${state.courtId}/calibrations`);
+  if (ticket !== historyRequests) return;
   state.calibrations = calibrations;
   $("history-panel").hidden = false;
   const list = $("history");

@@ -405,7 +405,13 @@ def convergence_picture(
     s = width / 960
     left, right, top, bottom = 90 * s, width - 24 * s, 40 * s, height - 60 * s
     text_scale = 0.5 * s
-    _text(image, "Optimisation: fitness per generation", (left, 26 * s), 0.6 * s, INK)
+    _text(
+        image,
+        "How the fit converged: search hypotheses, GA generations",
+        (left, 26 * s),
+        0.6 * s,
+        INK,
+    )
 
     curves = [c for c in (convergence or []) if len(c.get("x") or []) >= 1]
     if not curves:
