@@ -237,6 +237,9 @@ def search_cameras(
         image_lines = segments.merge_collinear(segments.segments_of(chains, lens, min_length))
         groups = search.vanishing_groups(image_lines)
         line_parts.append(search.floor_hypotheses(image_lines, groups, model, image_size, lens))
+        line_parts.append(
+            search.front_wall_hypotheses(image_lines, groups, model, image_size, lens)
+        )
         n_lines, n_groups = max(n_lines, len(image_lines)), max(n_groups, len(groups))
     from_lines = np.concatenate(line_parts)
     grid = search.candidate_starts(image_size, model)
@@ -258,6 +261,7 @@ def search_cameras(
         traced("floor pass", genomes)
     coarse = search.coarse_scores(genomes, model, maps, rank_tolerance)
     coarse[search.floor_shares(genomes, model, image_size) < search.MIN_FLOOR_SHARE] = -np.inf
+    coarse[search.in_play_volume(genomes, model)] = -np.inf
     if len(genomes) > VERIFIED_HYPOTHESES:
         keep = np.argpartition(-coarse, VERIFIED_HYPOTHESES)[:VERIFIED_HYPOTHESES]
         keep = np.union1d(keep, np.flatnonzero(sources == HINT))  # the hint always goes on
@@ -293,6 +297,7 @@ def search_cameras(
     traced("polished", polished)
     tolerance = search.verify_tolerance_px(width)
     _, _, polished_scores = search.edge_support(polished, verify, maps, tolerance)
+    polished_scores[search.in_play_volume(polished, model)] = -np.inf
     best = search.distinct_best(polished, polished_scores, model, image_size, REFINED_CANDIDATES)
     best = np.array([i for i in best if np.isfinite(polished_scores[i])], dtype=np.int64)
     traced("candidates", polished[best])
@@ -345,16 +350,18 @@ def score_cameras(
     genomes: np.ndarray,
     verify: search.VerifySamples,
     maps: lines.EvidenceMaps,
+    model: CourtModel,
     image_size: tuple[int, int],
 ) -> np.ndarray:
     """Final comparison score (log-likelihood ratio at the verdict's tolerance); -inf for cameras
-    whose lens folds inside the picture or that are not finite."""
+    whose lens folds inside the picture, that stand where players play or are not finite."""
     pop = camera.as_population(genomes)
     tolerance = quality.verdict_tolerance_px(image_size[0])
     _, _, scores = search.edge_support(pop, verify, maps, tolerance)
     for k, g in enumerate(pop):
         if not np.all(np.isfinite(g)) or lens_folds_in_image(g, image_size):
             scores[k] = -np.inf
+    scores[search.in_play_volume(pop, model)] = -np.inf
     return scores
 
 
@@ -363,6 +370,7 @@ def refine_candidates(
     samples: refine.FitSamples,
     maps: lines.EvidenceMaps,
     verify: search.VerifySamples,
+    model: CourtModel,
     image_size: tuple[int, int],
 ) -> tuple[int, refine.Fit, np.ndarray]:
     """Refine each candidate (pinhole + k1, coarse to fine) and pick the one with the highest
@@ -373,7 +381,7 @@ def refine_candidates(
     taus = refine_taus(image_size[0])
     fits = [refine.refine_coarse_to_fine(g, samples, maps, taus) for g in candidates]
     genomes = np.array([f.genome for f in fits])
-    scores = score_cameras(genomes, verify, maps, image_size)
+    scores = score_cameras(genomes, verify, maps, model, image_size)
     best = int(np.argmax(scores))
     return best, fits[best], scores
 
@@ -582,7 +590,7 @@ def calibrate(
     t0 = time.perf_counter()
     report("refining", 0.0, {})
     samples = refine.fit_samples(model, spacing)
-    best, fit, refined_scores = refine_candidates(candidates, samples, maps, verify, size)
+    best, fit, refined_scores = refine_candidates(candidates, samples, maps, verify, model, size)
     report("refining", 0.4, {})
     # with the camera known, what lies off the court (reflections in glass walls, crowds and
     # adverts seen on or through them) is set aside for the final fit and the verdict
@@ -599,6 +607,7 @@ def calibrate(
     figures["floor_error_t_cm"] = float("inf") if floor_t is None else float(floor_t)
     figures["rms_px"] = fit.rms_px
     figures["floor_share"] = float(search.floor_shares(fit.genome, model, size)[0])
+    figures["camera_in_play_volume"] = float(search.in_play_volume(fit.genome, model)[0])
     figures.update({f"search_{k}": v for k, v in found.info.items()})
     judged = quality.verdict(figures)
     timings["refine"] = time.perf_counter() - t0

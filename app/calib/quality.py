@@ -201,6 +201,11 @@ def verdict(figures: dict[str, float]) -> Verdict:
             f"the court's floor would fill only {figures['floor_share']:.0%} of the picture: "
             "film the floor, where the players' feet are"
         )
+    if figures.get("camera_in_play_volume", 0.0) > 0.0:
+        refusals.append(
+            "the camera would stand inside the court where the players play, which no fixed "
+            "camera does"
+        )
     if figures["absent_fraction"] > MAX_ABSENT_FRACTION:
         refusals.append(
             f"{figures['absent_fraction']:.0%} of the court the camera predicts in the picture "

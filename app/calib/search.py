@@ -60,6 +60,12 @@ FOCAL_RANGE_OF_WIDTH = (0.25, 12.0)
 HEIGHT_RANGE_M = (0.3, 25.0)
 MAX_DISTANCE_FROM_COURT_M = 45.0
 MAX_ROLL_RAD = np.deg2rad(15.0)
+# Where players move and swing (`_in_play_volume`): no fixed camera stands there. Margins (m)
+# from the front and side walls (a camera mounted in a corner or on a wall) and from the back
+# wall (a tripod against it), and the height (m) above which a camera is out of a racket's reach.
+PLAY_VOLUME_WALL_MARGIN_M = 1.0
+PLAY_VOLUME_BACK_MARGIN_M = 2.0
+PLAY_VOLUME_HEIGHT_M = 2.0
 MAX_TILT_UP_RAD = np.deg2rad(15.0)
 MAX_TILT_DOWN_RAD = np.deg2rad(75.0)
 # Verification: sample spacing (m), distance tolerance (px at 1920 px wide) for ranking raw
@@ -325,25 +331,17 @@ def _upright(dx: float, dy: float, dz: float) -> bool:
     return dy > 0.0 and abs(np.arctan2(dx, dy)) <= MAX_ROLL_RAD
 
 
-@numba.njit(cache=True)
-def _pose_from_normalised(
+@numba.njit(cache=True, inline="always")
+def _orthonormal_axes(
     m: np.ndarray,
-    height_min: float,
-    height_max: float,
-    max_distance: float,
-    court_centre: np.ndarray,
-    anchor: np.ndarray,
-    out_r: np.ndarray,
-    out_t: np.ndarray,
-) -> bool:
-    """Pose (R, t written to out_r, out_t) of a normalised floor homography m = K^-1 H (court floor
-    (x, y, 1) -> normalised camera coordinates, up to scale); False if the camera is not upright
-    or implausibly placed. `anchor` (2,) is a floor point that must be in front of the camera.
+) -> tuple[float, float, float, float, float, float, float, float, float]:
+    """The nearest pair of orthonormal axes (u, v) to the first two columns of a normalised plane
+    homography m = K^-1 H (plane (a, b, 1) -> normalised camera coordinates, up to scale), and
+    the translation t = m's third column over the scale: (ux, uy, uz, vx, vy, vz, tx, ty, tz).
 
-    The nearest pair of orthonormal axes to m's first two columns (polar decomposition) is taken:
-    the mismatch of a homography from slightly misplaced lines is shared by both axes, not all
-    put on one. Q = M (M^T M)^(-1/2), with the square root of the 2 x 2 Gram matrix in closed form.
-    """
+    Polar decomposition: the mismatch of a homography from slightly misplaced lines is shared
+    by both axes, not all put on one. Q = M (M^T M)^(-1/2), with the square root of the 2 x 2
+    Gram matrix in closed form; the scale is the mean singular value (half its trace)."""
     ax, ay, az = m[0, 0], m[1, 0], m[2, 0]
     bx, by, bz = m[0, 1], m[1, 1], m[2, 1]
     g11 = ax * ax + ay * ay + az * az
@@ -356,61 +354,133 @@ def _pose_from_normalised(
     i11, i12, i22 = s22 / det_s, -s12 / det_s, s11 / det_s  # G^(-1/2)
     ux, uy, uz = ax * i11 + bx * i12, ay * i11 + by * i12, az * i11 + bz * i12
     vx, vy, vz = ax * i12 + bx * i22, ay * i12 + by * i22, az * i12 + bz * i22
-    # the singular values of M are the eigenvalues of G^(1/2): their mean is half its trace
     scale = 0.5 * (s11 + s22)
-    tx, ty, tz = m[0, 2] / scale, m[1, 2] / scale, m[2, 2] / scale
+    return ux, uy, uz, vx, vy, vz, m[0, 2] / scale, m[1, 2] / scale, m[2, 2] / scale
+
+
+@numba.njit(cache=True, inline="always")
+def _placed_plausibly(
+    r: np.ndarray,
+    t: np.ndarray,
+    height_min: float,
+    height_max: float,
+    max_distance: float,
+    court_centre: np.ndarray,
+    court_size: np.ndarray,
+) -> bool:
+    """Whether a camera (X_cam = r X + t) stands where courts are filmed from: at a plausible
+    height and distance, and not where players play (see `in_play_volume`)."""
+    cx = -(r[0, 0] * t[0] + r[1, 0] * t[1] + r[2, 0] * t[2])
+    cy = -(r[0, 1] * t[0] + r[1, 1] * t[1] + r[2, 1] * t[2])
+    cz = -(r[0, 2] * t[0] + r[1, 2] * t[1] + r[2, 2] * t[2])
+    if not (height_min <= -cz <= height_max):
+        return False
+    if abs(cx - court_centre[0]) > max_distance or abs(cy - court_centre[1]) > max_distance:
+        return False
+    return not _in_play_volume(cx, cy, cz, court_size[0], court_size[1])
+
+
+@numba.njit(cache=True, inline="always")
+def _in_play_volume(x: float, y: float, z: float, width_m: float, length_m: float) -> bool:
+    """Whether a point (court frame, z down) is where players move and swing: inside the court,
+    more than PLAY_VOLUME_WALL_MARGIN_M from the side and front walls, in front of the back
+    PLAY_VOLUME_BACK_MARGIN_M, below PLAY_VOLUME_HEIGHT_M. No fixed camera stands there (it
+    would be hit); cameras inside the court are mounted on a wall, in a corner, high up, or on a
+    tripod against the back wall."""
+    return (
+        PLAY_VOLUME_WALL_MARGIN_M < x < width_m - PLAY_VOLUME_WALL_MARGIN_M
+        and PLAY_VOLUME_WALL_MARGIN_M < y < length_m - PLAY_VOLUME_BACK_MARGIN_M
+        and z > -PLAY_VOLUME_HEIGHT_M
+    )
+
+
+def in_play_volume(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
+    """(N,) bool: the camera centre is where players play (no fixed camera stands there)."""
+    pop = camera.as_population(genomes)
+    out = np.zeros(len(pop), dtype=bool)
+    r = np.empty((3, 3))
+    t = np.empty(3)
+    for i, g in enumerate(pop):
+        if not np.all(np.isfinite(g)):
+            continue
+        extrinsics_njit(g, r, t)
+        c = -r.T @ t
+        out[i] = _in_play_volume(c[0], c[1], c[2], model.spec.width_m, model.spec.length_m)
+    return out
+
+
+@numba.njit(cache=True)
+def _pose_from_normalised(
+    m: np.ndarray,
+    height_min: float,
+    height_max: float,
+    max_distance: float,
+    court_centre: np.ndarray,
+    court_size: np.ndarray,
+    anchor: np.ndarray,
+    out_r: np.ndarray,
+    out_t: np.ndarray,
+) -> bool:
+    """Pose (R, t written to out_r, out_t) of a normalised floor homography m = K^-1 H (court floor
+    (x, y, 1) -> normalised camera coordinates, up to scale); False if the camera is not upright
+    or implausibly placed. `anchor` (2,) is a floor point that must be in front of the camera."""
+    ux, uy, uz, vx, vy, vz, tx, ty, tz = _orthonormal_axes(m)
     # the sign of the scale: the anchor must be in front of the camera
     if uz * anchor[0] + vz * anchor[1] + tz < 0.0:
         ux, uy, uz = -ux, -uy, -uz
         vx, vy, vz = -vx, -vy, -vz
         tx, ty, tz = -tx, -ty, -tz
+    # the court's x and y axes in camera coordinates; down (z) is their cross product
     wx = uy * vz - uz * vy
     wy = uz * vx - ux * vz
     wz = ux * vy - uy * vx
     if not _upright(wx, wy, wz):
         return False
-    # camera centre C = -R^T t (court frame, z down)
-    cx = -(ux * tx + uy * ty + uz * tz)
-    cy = -(vx * tx + vy * ty + vz * tz)
-    cz = -(wx * tx + wy * ty + wz * tz)
-    if not (height_min <= -cz <= height_max):
-        return False
-    if abs(cx - court_centre[0]) > max_distance or abs(cy - court_centre[1]) > max_distance:
-        return False
     out_r[0, 0], out_r[1, 0], out_r[2, 0] = ux, uy, uz
     out_r[0, 1], out_r[1, 1], out_r[2, 1] = vx, vy, vz
     out_r[0, 2], out_r[1, 2], out_r[2, 2] = wx, wy, wz
     out_t[0], out_t[1], out_t[2] = tx, ty, tz
-    return True
+    return _placed_plausibly(
+        out_r, out_t, height_min, height_max, max_distance, court_centre, court_size
+    )
 
 
 @numba.njit(cache=True)
-def _pose_from_floor_homography(
-    h: np.ndarray,
-    focal_min: float,
-    focal_max: float,
+def _pose_from_front_wall(
+    m: np.ndarray,
     height_min: float,
     height_max: float,
     max_distance: float,
     court_centre: np.ndarray,
-    anchor: np.ndarray,
+    court_size: np.ndarray,
     out_r: np.ndarray,
     out_t: np.ndarray,
-) -> float:
-    """Camera of a floor homography `h` (pixels relative to the principal point, square pixels;
-    see `_focal_of_floor_homography`): its focal length (R, t written to out_r, out_t), or -1 if
-    the homography is not that of a rotation or the camera is implausible."""
-    f = _focal_of_floor_homography(h, focal_min, focal_max)
-    if f < 0.0:
-        return -1.0
-    m = h.copy()
-    m[0, :] /= f
-    m[1, :] /= f
-    if not _pose_from_normalised(
-        m, height_min, height_max, max_distance, court_centre, anchor, out_r, out_t
-    ):
-        return -1.0
-    return f
+) -> bool:
+    """Pose of a normalised front-wall homography m = K^-1 H (front wall (x, z, 1) -> normalised
+    camera coordinates, up to scale), as `_pose_from_normalised`; the camera must look at the
+    wall's painted (court) side."""
+    ux, uy, uz, vx, vy, vz, tx, ty, tz = _orthonormal_axes(m)
+    # the wall's centre (x = width / 2, 1 m up) must be in front of the camera
+    if uz * 0.5 * court_size[0] - vz + tz < 0.0:
+        ux, uy, uz = -ux, -uy, -uz
+        vx, vy, vz = -vx, -vy, -vz
+        tx, ty, tz = -tx, -ty, -tz
+    # u, v are the court's x and z (down) axes in camera coordinates; y = z cross x
+    if not _upright(vx, vy, vz):
+        return False
+    wx = vy * uz - vz * uy
+    wy = vz * ux - vx * uz
+    wz = vx * uy - vy * ux
+    out_r[0, 0], out_r[1, 0], out_r[2, 0] = ux, uy, uz
+    out_r[0, 1], out_r[1, 1], out_r[2, 1] = wx, wy, wz
+    out_r[0, 2], out_r[1, 2], out_r[2, 2] = vx, vy, vz
+    out_t[0], out_t[1], out_t[2] = tx, ty, tz
+    # the camera is on the court's side of the front wall (y > 0)
+    if -(wx * tx + wy * ty + wz * tz) <= 0.0:
+        return False
+    return _placed_plausibly(
+        out_r, out_t, height_min, height_max, max_distance, court_centre, court_size
+    )
 
 
 @numba.njit(cache=True, inline="always")
@@ -666,6 +736,7 @@ def _poses_njit(
     height_max: float,
     max_distance: float,
     court_centre: np.ndarray,
+    court_size: np.ndarray,
     out_r: np.ndarray,
     out_t: np.ndarray,
 ) -> np.ndarray:
@@ -681,7 +752,15 @@ def _poses_njit(
             m[1, c] = (h[1, c] - cy * h[2, c]) / fy
             m[2, c] = h[2, c]
         ok[i] = _pose_from_normalised(
-            m, height_min, height_max, max_distance, court_centre, court_centre, out_r[i], out_t[i]
+            m,
+            height_min,
+            height_max,
+            max_distance,
+            court_centre,
+            court_size,
+            court_centre,
+            out_r[i],
+            out_t[i],
         )
     return ok
 
@@ -847,10 +926,249 @@ def floor_hypotheses(
         HEIGHT_RANGE_M[1],
         MAX_DISTANCE_FROM_COURT_M,
         court_centre,
+        np.array([model.spec.width_m, model.spec.length_m]),
         out_r,
         out_t,
     )
     return genomes_from_poses(all_k[ok], out_r[ok], out_t[ok], image_size, undistortion)
+
+
+# Front-wall hypotheses (`front_wall_hypotheses`): lines per group taken into quadruples, and
+# focal lengths tried (a geometric grid over FOCAL_RANGE_OF_WIDTH) when the wall is seen nearly
+# face-on: its homography then says little about the focal length, which the floor decides in
+# the verification.
+WALL_LINES_PER_GROUP = 8
+WALL_FOCAL_STEPS = 16
+# A grid focal length is tried when the wall's axes under it are this close to orthogonal and
+# equally long: looser than for a solved focal length, as the grid steps by 27% and the corners
+# may come from the ends of lines.
+WALL_MAX_AXES_COS = 0.15
+WALL_MAX_AXES_LENGTH_RATIO = 0.25
+MAX_WALL_HYPOTHESES = 200_000
+
+
+def front_wall_values(model: CourtModel) -> tuple[np.ndarray, np.ndarray]:
+    """(z values (m, down) of the front wall's lines across it: floor junction, tin, service line,
+    out line; x values of its two corners)."""
+    heights = sorted(
+        {float(model.node(name)[2]) for name in model.node_names if model.node(name)[1] == 0.0}
+    )
+    return np.array(heights), np.array([0.0, model.spec.width_m])
+
+
+def could_be_across(vp: np.ndarray, centre: np.ndarray) -> bool:
+    """Whether a vanishing point can be that of the court's x axis (the front wall's lines and
+    the floor lines across the court) for a level camera: towards the left or right of the
+    picture rather than above or below it."""
+    d = vp[:2] if abs(vp[2]) < 1e-12 * np.linalg.norm(vp[:2]) else vp[:2] / vp[2] - centre
+    return bool(abs(d[0]) >= abs(d[1]))
+
+
+def could_be_upright(vp: np.ndarray, centre: np.ndarray) -> bool:
+    """Whether a vanishing point can be the world's vertical for a level camera: straight above
+    or below the picture (`could_be_vertical`), or at infinity along the picture's vertical
+    (vertical lines parallel in the image)."""
+    if abs(vp[2]) < 1e-12 * np.linalg.norm(vp[:2]):
+        return bool(abs(np.arctan2(vp[0], abs(vp[1]))) <= MAX_ROLL_RAD + np.deg2rad(10.0))
+    return could_be_vertical(vp, centre)
+
+
+@numba.njit(cache=True)
+def _wall_hypotheses_njit(
+    across_lines: np.ndarray,
+    upright_lines: np.ndarray,
+    z_values: np.ndarray,
+    x_values: np.ndarray,
+    centre: np.ndarray,
+    width: float,
+    height: float,
+    focal_grid: np.ndarray,
+    min_area: float,
+    height_min: float,
+    height_max: float,
+    max_distance: float,
+    court_centre: np.ndarray,
+    court_size: np.ndarray,
+    out_r: np.ndarray,
+    out_t: np.ndarray,
+    out_f: np.ndarray,
+) -> int:
+    """Every quadruple of two `across_lines` and two `upright_lines` under every assignment of
+    front-wall line heights and corners: the cameras (square pixels, principal point at the
+    centre) whose front wall they are, written to out_r, out_t, out_f; returns the count.
+
+    The focal length comes from the wall homography when it pins one (the wall seen at an
+    angle); every grid focal length the homography is consistent with is tried as well (a wall
+    seen face-on is consistent with all of them)."""
+    n_a = across_lines.shape[0]
+    n_b = upright_lines.shape[0]
+    cap = out_r.shape[0]
+    n_out = 0
+    limit = 3.0 * max(width, height)
+    quad = np.empty((4, 2))
+    hm = np.empty((3, 3))
+    m = np.empty((3, 3))
+    focal_min, focal_max = focal_grid[0], focal_grid[focal_grid.shape[0] - 1]
+    for i in range(n_a):
+        for j in range(i + 1, n_a):
+            for kk in range(n_b):
+                for ll in range(kk + 1, n_b):
+                    ok = True
+                    for c, (la, lb) in enumerate(
+                        (
+                            (across_lines[i], upright_lines[kk]),
+                            (across_lines[i], upright_lines[ll]),
+                            (across_lines[j], upright_lines[kk]),
+                            (across_lines[j], upright_lines[ll]),
+                        )
+                    ):
+                        x, y, good = _intersect(la, lb)
+                        if not good or abs(x - centre[0]) > limit or abs(y - centre[1]) > limit:
+                            ok = False
+                            break
+                        quad[c, 0] = x - centre[0]
+                        quad[c, 1] = y - centre[1]
+                    if not ok:
+                        continue
+                    area = 0.5 * abs(
+                        (quad[0, 0] * quad[1, 1] - quad[1, 0] * quad[0, 1])
+                        + (quad[1, 0] * quad[3, 1] - quad[3, 0] * quad[1, 1])
+                        + (quad[3, 0] * quad[2, 1] - quad[2, 0] * quad[3, 1])
+                        + (quad[2, 0] * quad[0, 1] - quad[0, 0] * quad[2, 1])
+                    )
+                    if area < min_area:
+                        continue
+                    # unit square (X' along the upright pair kk->ll, Y' across i->j) -> image
+                    hu = _square_to_quad(quad)
+                    if hu[2, 2] == 0.0:
+                        continue
+                    for p in range(z_values.shape[0]):
+                        for q in range(z_values.shape[0]):
+                            if p == q:
+                                continue
+                            dz = z_values[q] - z_values[p]
+                            zp = z_values[p]
+                            for r in range(2):
+                                xr = x_values[r]
+                                dx = x_values[1 - r] - xr
+                                for row in range(3):
+                                    hm[row, 0] = hu[row, 0] / dx
+                                    hm[row, 1] = hu[row, 1] / dz
+                                    hm[row, 2] = hu[row, 2] - xr * hm[row, 0] - zp * hm[row, 1]
+                                solved = _focal_of_floor_homography(hm, focal_min, focal_max)
+                                for g in range(-1, focal_grid.shape[0]):
+                                    f = solved if g < 0 else focal_grid[g]
+                                    if f <= 0.0:
+                                        continue
+                                    if g >= 0 and not _axes_consistent(
+                                        hm, f, WALL_MAX_AXES_COS, WALL_MAX_AXES_LENGTH_RATIO
+                                    ):
+                                        continue
+                                    if n_out >= cap:
+                                        return n_out
+                                    for c in range(3):
+                                        m[0, c] = hm[0, c] / f
+                                        m[1, c] = hm[1, c] / f
+                                        m[2, c] = hm[2, c]
+                                    if _pose_from_front_wall(
+                                        m,
+                                        height_min,
+                                        height_max,
+                                        max_distance,
+                                        court_centre,
+                                        court_size,
+                                        out_r[n_out],
+                                        out_t[n_out],
+                                    ):
+                                        out_f[n_out] = f
+                                        n_out += 1
+    return n_out
+
+
+@numba.njit(cache=True, inline="always")
+def _axes_consistent(h: np.ndarray, f: float, max_cos: float, max_length_ratio: float) -> bool:
+    """Whether a plane homography (pixels relative to the principal point) under focal length f
+    has orthogonal axes (|cos| <= max_cos) of equal length (to max_length_ratio)."""
+    r1x, r1y, r1z = h[0, 0] / f, h[1, 0] / f, h[2, 0]
+    r2x, r2y, r2z = h[0, 1] / f, h[1, 1] / f, h[2, 1]
+    n1 = np.sqrt(r1x * r1x + r1y * r1y + r1z * r1z)
+    n2 = np.sqrt(r2x * r2x + r2y * r2y + r2z * r2z)
+    if n1 == 0.0 or n2 == 0.0:
+        return False
+    if abs((r1x * r2x + r1y * r2y + r1z * r2z) / (n1 * n2)) > max_cos:
+        return False
+    return abs(n1 / n2 - 1.0) <= max_length_ratio
+
+
+def front_wall_hypotheses(
+    lines: ImageLines,
+    groups: list[VanishingGroup],
+    model: CourtModel,
+    image_size: tuple[int, int],
+    undistortion: Undistortion | None,
+) -> np.ndarray:
+    """Plausible cameras (N, 15) from two lines of a group that can run across the court taken
+    as two of the front wall's lines (floor junction, tin, service line, out line) and two of a
+    group that can be the vertical taken as its corners: a wall rectangle, hence a homography
+    and a camera. Views from behind the back wall show the front wall best of all; its floor
+    lines may be faint, short or hidden by players."""
+    width, height = image_size
+    centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    z_values, x_values = front_wall_values(model)
+    homog = lines.homogeneous()
+    strength = lines.strength()
+    focal_grid = width * np.geomspace(*FOCAL_RANGE_OF_WIDTH, WALL_FOCAL_STEPS)
+    court_centre = np.array([model.spec.width_m / 2.0, model.spec.length_m / 2.0])
+    court_size = np.array([model.spec.width_m, model.spec.length_m])
+    out_r = np.empty((MAX_WALL_HYPOTHESES, 3, 3))
+    out_t = np.empty((MAX_WALL_HYPOTHESES, 3))
+    out_f = np.empty(MAX_WALL_HYPOTHESES)
+    upright_groups = [g for g in groups if could_be_upright(g.point, centre)]
+    # the vertical's vanishing point: the best-supported group that can be it, else straight
+    # down the picture at infinity (a level camera)
+    vertical = upright_groups[0].point if upright_groups else np.array([0.0, 1.0, 0.0])
+    quads: list[tuple[np.ndarray, np.ndarray]] = []
+    for ga in groups:
+        if not could_be_across(ga.point, centre):
+            continue
+        across = strongest(ga.lines, strength, WALL_LINES_PER_GROUP)
+        if len(across) < 2:
+            continue
+        for gb in upright_groups:
+            if gb is not ga and len(gb.lines) >= 2:
+                quads.append(
+                    (homog[across], homog[strongest(gb.lines, strength, WALL_LINES_PER_GROUP)])
+                )
+        # the wall's lines end at its corners, which may be too faint to be lines of their
+        # own: corners through the ends of the lines across, towards the vertical
+        ends = lines.extent[across].reshape(-1, 2)
+        corners = np.cross(np.column_stack([ends, np.ones(len(ends))]), vertical)
+        quads.append((homog[across], corners))
+    parts = []
+    for a, b in quads:
+        n = _wall_hypotheses_njit(
+            np.ascontiguousarray(a, dtype=np.float64),
+            np.ascontiguousarray(b, dtype=np.float64),
+            z_values,
+            x_values,
+            centre,
+            float(width),
+            float(height),
+            focal_grid,
+            MIN_QUAD_AREA_SHARE * width * height,
+            HEIGHT_RANGE_M[0],
+            HEIGHT_RANGE_M[1],
+            MAX_DISTANCE_FROM_COURT_M,
+            court_centre,
+            court_size,
+            out_r,
+            out_t,
+            out_f,
+        )
+        parts.append(genomes_from_poses(out_f[:n], out_r[:n], out_t[:n], image_size, undistortion))
+    if not parts:
+        return np.zeros((0, camera.N_GENES))
+    return np.concatenate(parts)
 
 
 def distinct_homographies(
