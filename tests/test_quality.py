@@ -69,6 +69,7 @@ def _typical_right() -> dict[str, float]:
         "absent_fraction": 0.1,
         "floor_error_t_cm": 0.5,
         "floor_share": 0.3,
+        "camera_in_play_volume": 0.0,
     }
 
 
@@ -88,6 +89,7 @@ def test_typical_right_figures_are_good():
         ({"floor_error_t_cm": 80.0}, "do not pin the camera down"),
         ({"floor_share": 0.01}, "film the floor"),
         ({"absent_fraction": 0.7}, "has no line there"),
+        ({"camera_in_play_volume": 1.0}, "where the players play"),
     ],
 )
 def test_each_rule_refuses_with_its_reason(change, words):

@@ -66,6 +66,65 @@ def test_floor_hypotheses_contain_the_camera_that_made_the_lines():
     assert np.all(down_in_camera[:, 1] > 0)
 
 
+FRONT_WALL_LINES = ["service", "tin", "front_out", "front_floor"]
+
+
+def _low_tripod_behind_back_wall() -> np.ndarray:
+    """A phone 1.1 m high, 1.5 m behind the back wall and off-centre, looking at the front wall:
+    the floor is seen at a grazing angle."""
+    from app.calib.cases import look_at_rotation, make_genome
+
+    centre = np.array([4.5, 11.3, -1.1])
+    rotation = look_at_rotation(centre, np.array([3.2, 0.0, -1.0]), 0.0)
+    f = 0.65 * SIZE[0]
+    return make_genome(centre, rotation, f, f, ((SIZE[0] - 1) / 2, (SIZE[1] - 1) / 2), np.zeros(5))
+
+
+@pytest.mark.parametrize("with_corners", [True, False])
+def test_front_wall_hypotheses_contain_the_camera_that_made_the_lines(with_corners):
+    truth = _low_tripod_behind_back_wall()
+    corners = ["front_left_corner_mid", "front_right_corner_mid"] if with_corners else []
+    image_lines = _image_lines(truth, FRONT_WALL_LINES + corners)
+    groups = search.vanishing_groups(image_lines)
+    model = court.court_model()
+    hypotheses = search.front_wall_hypotheses(image_lines, groups, model, SIZE, None)
+    # the floor hypotheses cannot make this camera: no floor line along the court is seen
+    assert len(search.floor_hypotheses(image_lines, groups, model, SIZE, None)) == 0
+    assert len(hypotheses) > 0
+    # the wall is seen nearly face-on: the focal length comes from a grid (27% steps) and the
+    # camera is a start for the polish, not the answer
+    errors = _floor_error_px(truth, hypotheses, walls_too=True)
+    assert errors.min() < 0.05 * SIZE[0]
+    best = hypotheses[np.argmin(errors)]
+    assert abs(best[0] / truth[0] - 1.0) < 0.15
+    r, _ = camera.court_extrinsics(hypotheses)
+    assert np.all(r[:, 1, 2] > 0)  # level: the court's down is down in the picture
+
+
+def test_no_camera_stands_where_players_play():
+    model = court.court_model()
+
+    def at(x: float, y: float, height_m: float) -> np.ndarray:
+        from app.calib.cases import look_at_rotation, make_genome
+
+        centre = np.array([x, y, -height_m])
+        rotation = look_at_rotation(centre, np.array([3.2, 4.0, 0.0]), 0.0)
+        return make_genome(centre, rotation, 500.0, 500.0, (479.5, 269.5), np.zeros(5))
+
+    # mid-court at head height, and by the front wall's middle: where players run and swing
+    inside = [at(3.2, 5.0, 1.5), at(1.6, 2.3, 1.1)]
+    # behind the back wall, on a tripod against it, in a front corner, high on a wall, above
+    outside = [
+        at(3.2, 13.0, 3.0),
+        at(3.2, 9.0, 1.2),
+        at(0.5, 0.5, 2.0),
+        at(3.2, 6.0, 2.5),
+        at(3.2, 4.0, 6.0),
+    ]
+    assert search.in_play_volume(np.array(inside), model).all()
+    assert not search.in_play_volume(np.array(outside), model).any()
+
+
 def test_a_cropped_photo_is_found_with_the_vertical():
     truth = _pinhole_target()
     truth[camera.GENE["c_u"]] += 0.3 * SIZE[0]  # the principal point far right of the centre

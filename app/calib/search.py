@@ -576,6 +576,41 @@ def _intrinsics_with_vertical(
     return True
 
 
+@numba.njit(cache=True, inline="always")
+def _unit_square_homography(
+    a1: np.ndarray,
+    a2: np.ndarray,
+    b1: np.ndarray,
+    b2: np.ndarray,
+    centre: np.ndarray,
+    limit: float,
+    min_area: float,
+    quad: np.ndarray,
+) -> np.ndarray:
+    """Homography (3, 3) from the unit square (X' from line b1 to b2, Y' from a1 to a2) to the
+    quadrangle where the lines meet (pixels relative to `centre`), or zeros when a corner is
+    missing or beyond `limit` px or the quadrangle is smaller than `min_area` (it pins nothing).
+    `quad` (4, 2) is scratch space."""
+    corners = ((a1, b1), (a1, b2), (a2, b1), (a2, b2))
+    for m in range(4):
+        la, lb = corners[m]
+        x, y, good = _intersect(la, lb)
+        if not good or abs(x - centre[0]) > limit or abs(y - centre[1]) > limit:
+            return np.zeros((3, 3))
+        quad[m, 0] = x - centre[0]
+        quad[m, 1] = y - centre[1]
+    # shoelace over corners 0, 1, 3, 2
+    area = 0.5 * abs(
+        (quad[0, 0] * quad[1, 1] - quad[1, 0] * quad[0, 1])
+        + (quad[1, 0] * quad[3, 1] - quad[3, 0] * quad[1, 1])
+        + (quad[3, 0] * quad[2, 1] - quad[2, 0] * quad[3, 1])
+        + (quad[2, 0] * quad[0, 1] - quad[0, 0] * quad[2, 1])
+    )
+    if area < min_area:
+        return np.zeros((3, 3))
+    return _square_to_quad(quad)
+
+
 @numba.njit(cache=True)
 def _hypotheses_njit(
     across_lines: np.ndarray,
@@ -621,34 +656,17 @@ def _hypotheses_njit(
         for j in range(i + 1, n_a):
             for kk in range(n_b):
                 for ll in range(kk + 1, n_b):
-                    ok = True
-                    for m, (la, lb) in enumerate(
-                        (
-                            (across_lines[i], along_lines[kk]),
-                            (across_lines[i], along_lines[ll]),
-                            (across_lines[j], along_lines[kk]),
-                            (across_lines[j], along_lines[ll]),
-                        )
-                    ):
-                        x, y, good = _intersect(la, lb)
-                        if not good or abs(x - centre[0]) > limit or abs(y - centre[1]) > limit:
-                            ok = False
-                            break
-                        quad[m, 0] = x - centre[0]
-                        quad[m, 1] = y - centre[1]
-                    if not ok:
-                        continue
-                    # quadrangle area (shoelace over corners 0, 1, 3, 2): tiny ones pin nothing
-                    area = 0.5 * abs(
-                        (quad[0, 0] * quad[1, 1] - quad[1, 0] * quad[0, 1])
-                        + (quad[1, 0] * quad[3, 1] - quad[3, 0] * quad[1, 1])
-                        + (quad[3, 0] * quad[2, 1] - quad[2, 0] * quad[3, 1])
-                        + (quad[2, 0] * quad[0, 1] - quad[0, 0] * quad[2, 1])
-                    )
-                    if area < min_area:
-                        continue
                     # unit square (X' along the `along` pair kk->ll, Y' across i->j) -> image
-                    hu = _square_to_quad(quad)
+                    hu = _unit_square_homography(
+                        across_lines[i],
+                        across_lines[j],
+                        along_lines[kk],
+                        along_lines[ll],
+                        centre,
+                        limit,
+                        min_area,
+                        quad,
+                    )
                     if hu[2, 2] == 0.0:
                         continue
                     # intrinsics other than square pixels at the centre, from the vertical, for
@@ -1013,33 +1031,17 @@ def _wall_hypotheses_njit(
         for j in range(i + 1, n_a):
             for kk in range(n_b):
                 for ll in range(kk + 1, n_b):
-                    ok = True
-                    for c, (la, lb) in enumerate(
-                        (
-                            (across_lines[i], upright_lines[kk]),
-                            (across_lines[i], upright_lines[ll]),
-                            (across_lines[j], upright_lines[kk]),
-                            (across_lines[j], upright_lines[ll]),
-                        )
-                    ):
-                        x, y, good = _intersect(la, lb)
-                        if not good or abs(x - centre[0]) > limit or abs(y - centre[1]) > limit:
-                            ok = False
-                            break
-                        quad[c, 0] = x - centre[0]
-                        quad[c, 1] = y - centre[1]
-                    if not ok:
-                        continue
-                    area = 0.5 * abs(
-                        (quad[0, 0] * quad[1, 1] - quad[1, 0] * quad[0, 1])
-                        + (quad[1, 0] * quad[3, 1] - quad[3, 0] * quad[1, 1])
-                        + (quad[3, 0] * quad[2, 1] - quad[2, 0] * quad[3, 1])
-                        + (quad[2, 0] * quad[0, 1] - quad[0, 0] * quad[2, 1])
-                    )
-                    if area < min_area:
-                        continue
                     # unit square (X' along the upright pair kk->ll, Y' across i->j) -> image
-                    hu = _square_to_quad(quad)
+                    hu = _unit_square_homography(
+                        across_lines[i],
+                        across_lines[j],
+                        upright_lines[kk],
+                        upright_lines[ll],
+                        centre,
+                        limit,
+                        min_area,
+                        quad,
+                    )
                     if hu[2, 2] == 0.0:
                         continue
                     for p in range(z_values.shape[0]):
