@@ -104,7 +104,7 @@ def camera_errors(
     return float(np.median(floor_cm)), rms
 
 
-def clip_background(frames: tuple[np.ndarray, ...], fps: float) -> tuple[Any, Any]:
+def clip_background(frames: list[np.ndarray], fps: float) -> tuple[Any, Any]:
     """A clip goes through the same stage as an upload: written to a video file and read back."""
     from app.calib import background, scene
 
@@ -127,7 +127,7 @@ def run_case(kind: str, seed: int) -> Outcome:
         image, truth, spec, moving = case.image, case.genome, case.spec, None
         if case.frames is not None:
             try:
-                image, moving = clip_background(case.frames, case.fps or 25.0)
+                image, moving = clip_background(case.video_frames(), case.fps or 25.0)
             except background.ClipError as exc:
                 # the service refuses such a clip before any calibration: a refusal
                 size = (int(case.frames[0].shape[1]), int(case.frames[0].shape[0]))
@@ -229,7 +229,32 @@ def report(outcomes: list[Outcome], classes: list[str]) -> str:
         for g in [[o for o in negatives if o.kind == k]]
     ]
     neg_rows.append(["all", len(negatives), sum(o.accepted for o in negatives)])
-    return table + "\n\nnegatives\n" + format_table(["kind", "n", "accepted"], neg_rows)
+    return (
+        table
+        + "\n\nnegatives\n"
+        + format_table(["kind", "n", "accepted"], neg_rows)
+        + "\n\n"
+        + uncertainty_line(outcomes)
+    )
+
+
+def uncertainty_line(outcomes: list[Outcome]) -> str:
+    """How the floor error reported at the T (one standard deviation, RMS) compares with the
+    actual median floor error of the found cameras: for a calibrated report of a round 2D
+    Gaussian error, the median ratio is ~0.83 and ~63% of cameras are within their report."""
+    pairs = [
+        (o.floor_median_cm, o.figures["floor_error_t_cm"])
+        for o in outcomes
+        if o.accepted and o.right and o.figures.get("floor_error_t_cm", 0.0) > 0.0
+    ]
+    if not pairs:
+        return "reported floor error at the T: no found camera"
+    ratio = np.array([actual / reported for actual, reported in pairs])
+    return (
+        f"reported floor error at the T vs actual median floor error, {len(ratio)} found "
+        f"cameras: actual / reported median {np.median(ratio):.2f} (0.83 if calibrated), "
+        f"90th percentile {np.percentile(ratio, 90):.2f}; within the report {np.mean(ratio <= 1):.0%}"
+    )
 
 
 def write_csv(outcomes: list[Outcome], path: Path) -> None:

@@ -92,7 +92,9 @@ FLOOR_LINES: dict[str, tuple[tuple[str, ...], str]] = {
 class SyntheticCase:
     """One benchmark case. `image` is what a user uploads as a picture (for a clip: the first frame
     of the main shot); clips also carry all `frames`, `fps`, the frame range [start, stop) of the
-    longest run filmed by `genome` and the `cut_frames` filmed by another camera (a cut-away)."""
+    longest run filmed by `genome` and the `cut_frames` filmed by another camera (a cut-away).
+    Each rendered frame lasts `frame_hold` video frames: users upload clips of seconds, rendered
+    here at a few frames per second."""
 
     image: np.ndarray
     genome: np.ndarray
@@ -107,6 +109,11 @@ class SyntheticCase:
     cut_frames: tuple[int, ...] = ()
     visible_lines: tuple[str, ...] = ()
     floor_fraction: float = 0.0
+    frame_hold: int = 1
+
+    def video_frames(self) -> list[np.ndarray]:
+        """The clip's frames as a video at `fps` has them (each held `frame_hold` frames)."""
+        return [frame for frame in self.frames or () for _ in range(self.frame_hold)]
 
 
 @dataclass(frozen=True, eq=False)
@@ -1160,6 +1167,11 @@ def _clip_plan(rng: np.random.Generator, spec: str) -> CasePlan:
     return CasePlan(genome, size, spec, style, lines, fraction, base)
 
 
+# How long a clip lasts (s): a user's clip lasts seconds or minutes; the service asks for a
+# static view of at least `background.MIN_STATIC_VIEW_S`.
+CLIP_SECONDS = 3.0
+
+
 def _make_clip(rng: np.random.Generator, seed: int, spec: str) -> SyntheticCase:
     plan = _clip_plan(rng, spec)
     base = plan.filmed_like
@@ -1238,6 +1250,7 @@ def _make_clip(rng: np.random.Generator, seed: int, spec: str) -> SyntheticCase:
         cut_frames=tuple(sorted(cut_frames)),
         visible_lines=lines,
         floor_fraction=fraction,
+        frame_hold=max(1, round(CLIP_SECONDS * fps / n_frames)),
     )
 
 

@@ -326,6 +326,10 @@ def search_cameras(
     )
 
 
+# The camera model candidates are compared with (see `refine_candidates`).
+RANKING_MODEL = refine.model_with(("k2",))
+
+
 def refine_taus(image_width: int) -> tuple[float, ...]:
     return tuple(max(1.5, tau * image_width / 1920.0) for tau in REFINE_TAUS_AT_1920)
 
@@ -374,16 +378,30 @@ def refine_candidates(
     image_size: tuple[int, int],
 ) -> tuple[int, refine.Fit, np.ndarray]:
     """Refine each candidate (pinhole + k1, coarse to fine) and pick the one with the highest
-    score. Ranking by the verdict first (a camera it takes beats a higher-scoring one it refuses)
-    was measured and dropped: it lets the verdict judge several cameras per picture, and on other
-    sports' courts one of them then passes. Returns the winner's index, its fit and every
-    refined candidate's score."""
+    score. A candidate is scored at its best with a second radial term as well
+    (`RANKING_MODEL`): a wide-angle lens that one term cannot follow at the picture's edge would
+    otherwise lose its lines there to the tight tolerance, and the right camera to a wrong one
+    that puts fewer lines at the edge. The second term is kept when it raises the score (a
+    log-likelihood ratio) by more than BIC's penalty for it; the final fit may add more terms on
+    the evidence (`refine.select_model`). Ranking by the verdict first
+    (a camera it takes beats a higher-scoring one it refuses) was measured and dropped: it lets
+    the verdict judge several cameras per picture, and on other sports' courts one of them then
+    passes. Returns the winner's index, its fit and every refined candidate's score."""
     taus = refine_taus(image_size[0])
     fits = [refine.refine_coarse_to_fine(g, samples, maps, taus) for g in candidates]
-    genomes = np.array([f.genome for f in fits])
-    scores = score_cameras(genomes, verify, maps, model, image_size)
+    scores = score_cameras(np.array([f.genome for f in fits]), verify, maps, model, image_size)
+    richer = [
+        refine.refine_coarse_to_fine(g, samples, maps, taus, RANKING_MODEL) for g in candidates
+    ]
+    richer_scores = score_cameras(
+        np.array([f.genome for f in richer]), verify, maps, model, image_size
+    )
+    # the second term must earn its parameter: more than BIC's penalty for one more
+    penalty = float(np.log(len(samples.points)))
+    use_richer = richer_scores > scores + penalty
+    scores = np.where(use_richer, richer_scores, scores)
     best = int(np.argmax(scores))
-    return best, fits[best], scores
+    return best, (richer if use_richer[best] else fits)[best], scores
 
 
 def discriminating_edges(own: CourtModel, other: CourtModel) -> np.ndarray:

@@ -36,6 +36,12 @@ MIN_DEPTH_M = 0.05
 # Samples this many px apart along a line count as one independent residual (edge positions are
 # smoothed over a few pixels, and systematic deviations of a real court run along whole lines).
 CORRELATION_LENGTH_PX = 12.0
+# ... but what makes a calibrated camera wrong is systematic: a line's evidence off its model
+# line (paint width, wear, a lens the model follows only roughly) shifts the whole line, so the
+# parameters' covariance counts one independent residual per ~200 px of line. With the 12 px
+# above, the floor error reported at the T was 3.6 times the actual median error (bench.synthetic,
+# seeds 1000+, 54 found cameras); with 200 px it is a one-standard-deviation figure again.
+UNCERTAINTY_CORRELATION_LENGTH_PX = 200.0
 FD_RELATIVE_STEP = 1e-3
 
 
@@ -336,7 +342,8 @@ def select_model(
 
 def parameter_covariance(fit: Fit, samples: FitSamples, image_width: int) -> np.ndarray:
     """Covariance (15, 15) of the genome: sigma^2 (J^T J)^-1 mapped through the model's columns,
-    sigma^2 from the matched residuals, inflated for correlation along lines."""
+    sigma^2 from the matched residuals, inflated for correlation along lines
+    (UNCERTAINTY_CORRELATION_LENGTH_PX)."""
     j = fit.jacobian
     directions = fit.model.directions()
     inside = np.abs(fit.residual) < 0.999 * fit.tau_px
@@ -344,7 +351,7 @@ def parameter_covariance(fit: Fit, samples: FitSamples, image_width: int) -> np.
         return np.full((camera.N_GENES, camera.N_GENES), np.inf)
     sigma2 = float(np.sum(fit.residual[inside] ** 2) / (inside.sum() - fit.model.n_params))
     sample_px = max(samples.spacing_m * image_width / 19.2, 1.0)
-    inflation = max(1.0, CORRELATION_LENGTH_PX / sample_px)
+    inflation = max(1.0, UNCERTAINTY_CORRELATION_LENGTH_PX / sample_px)
     jtj = j[inside].T @ j[inside]
     try:
         cov_x = np.linalg.inv(jtj) * sigma2 * inflation
