@@ -149,6 +149,41 @@ def project_point_njit(
     return g[0] * xd + g[2], g[1] * yd + g[3], zc
 
 
+# A court sample this close to the camera's centre (m, along the optical axis) or behind it is
+# not seen (its pixel is meaningless or the line grazes the lens).
+MIN_SAMPLE_DEPTH_M = 0.05
+
+
+@numba.njit(cache=True, inline="always")
+def seen_pixel_njit(
+    r: np.ndarray,
+    t: np.ndarray,
+    g: np.ndarray,
+    x: float,
+    y: float,
+    z: float,
+    fold_tan2: float,
+    ignore: np.ndarray,
+) -> tuple[float, float, int, int, bool]:
+    """Where one court point lands and whether it is seen there: (u, v, iu, iv, seen), seen when
+    it is in front of the camera (MIN_SAMPLE_DEPTH_M), inside the lens fold (tan^2 of the fold's
+    angle; beyond it the polynomial maps points back into the picture as ghosts), inside the
+    picture and not on an `ignore`d pixel (iu, iv: the nearest pixel)."""
+    u, v, depth = project_point_njit(r, t, g, x, y, z)
+    if depth <= MIN_SAMPLE_DEPTH_M:
+        return u, v, 0, 0, False
+    xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
+    yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
+    if xc * xc + yc * yc > fold_tan2 * depth * depth:
+        return u, v, 0, 0, False
+    h, w = ignore.shape
+    if not (0.0 <= u <= w - 1.0 and 0.0 <= v <= h - 1.0):
+        return u, v, 0, 0, False
+    iu = int(u + 0.5)
+    iv = int(v + 0.5)
+    return u, v, iu, iv, not ignore[iv, iu]
+
+
 @numba.njit(cache=True)
 def _project_all(
     r: np.ndarray, t: np.ndarray, pop: np.ndarray, points: np.ndarray

@@ -27,12 +27,11 @@ import numpy as np
 from scipy import optimize
 
 from app.calib import camera
-from app.calib.camera import GENE, project_point_njit
+from app.calib.camera import GENE, project_point_njit, seen_pixel_njit
 from app.calib.court import CourtModel, sample_edges
 from app.calib.lines import EvidenceMaps
 
 FIT_MAX_ANGLE_RAD = np.deg2rad(30.0)
-MIN_DEPTH_M = 0.05
 # Samples this many px apart along a line count as one independent residual (edge positions are
 # smoothed over a few pixels, and systematic deviations of a real court run along whole lines).
 CORRELATION_LENGTH_PX = 12.0
@@ -97,7 +96,6 @@ def _residuals_njit(
 ) -> None:
     """Robust residuals (N, M) into `out`; signed raw point-to-line distances into `raw` (NaN
     where the sample is not matched)."""
-    h, w = ignore.shape
     r = np.empty((3, 3))
     t = np.empty(3)
     for i in range(pop.shape[0]):
@@ -107,18 +105,8 @@ def _residuals_njit(
             out[i, j] = tau
             raw[i, j] = np.nan
             x, y, z = points[j, 0], points[j, 1], points[j, 2]
-            u, v, depth = project_point_njit(r, t, g, x, y, z)
-            if depth <= MIN_DEPTH_M:
-                continue
-            xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
-            yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
-            if xc * xc + yc * yc > fold_tan2[i] * depth * depth:
-                continue
-            if not (0.0 <= u <= w - 1.0 and 0.0 <= v <= h - 1.0):
-                continue
-            iu = int(u + 0.5)
-            iv = int(v + 0.5)
-            if ignore[iv, iu]:
+            u, v, iu, iv, seen = seen_pixel_njit(r, t, g, x, y, z, fold_tan2[i], ignore)
+            if not seen:
                 continue
             k = near_ridge[iv, iu] if use_ridge[j] else near_any[iv, iu]
             if k < 0:

@@ -29,7 +29,12 @@ import numba
 import numpy as np
 
 from app.calib import camera
-from app.calib.camera import extrinsics_njit, project_point_njit
+from app.calib.camera import (
+    MIN_SAMPLE_DEPTH_M,
+    extrinsics_njit,
+    project_point_njit,
+    seen_pixel_njit,
+)
 from app.calib.court import COURT_SPECS, CourtModel, court_model, sample_edges
 from app.calib.lines import EvidenceMaps
 from app.calib.segments import ImageLines, Undistortion
@@ -1288,6 +1293,58 @@ def chance_maps(maps: EvidenceMaps, tolerance_px: float) -> ChanceMaps:
     return ChanceMaps(values, scale, float(tolerance_px))
 
 
+@numba.njit(cache=True, inline="always")
+def _sample_evidence(
+    iu: int,
+    iv: int,
+    du: float,
+    dv: float,
+    step_px: float,
+    painted: bool,
+    p_hit: float,
+    dist_ridge: np.ndarray,
+    near_ridge: np.ndarray,
+    dist_any: np.ndarray,
+    near_any: np.ndarray,
+    normals: np.ndarray,
+    tolerance: float,
+    max_sin: float,
+    chance: np.ndarray,
+    chance_scale: int,
+) -> tuple[float, float]:
+    """(support in [0, 1], log-likelihood ratio per tolerance length) of one court sample seen
+    at pixel (iu, iv) with its line running (du, dv) over step_px: support when evidence of the
+    right kind (ridges for painted lines) lies within `tolerance` and runs the same way, against
+    the chance of such support here for a line with this normal (direction bins interpolated)."""
+    if painted:
+        d = dist_ridge[iv, iu]
+        k = near_ridge[iv, iu]
+    else:
+        d = dist_any[iv, iu]
+        k = near_any[iv, iu]
+    support = 0.0
+    if (
+        k >= 0
+        and d <= tolerance
+        and abs(normals[k, 0] * du + normals[k, 1] * dv) <= max_sin * step_px
+    ):
+        support = 1.0 - d * d / (tolerance * tolerance)
+    n_bins = chance.shape[0]
+    angle = np.arctan2(du, -dv)
+    if angle < 0.0:
+        angle += np.pi
+    pos = angle * n_bins / np.pi - 0.5
+    b0 = int(np.floor(pos))
+    frac = pos - b0
+    b1 = (b0 + 1) % n_bins
+    b0 = b0 % n_bins
+    cu = min(iu // chance_scale, chance.shape[2] - 1)
+    cv = min(iv // chance_scale, chance.shape[1] - 1)
+    c = (1.0 - frac) * chance[b0, cv, cu] + frac * chance[b1, cv, cu]
+    llr = support * np.log(p_hit / c) + (1.0 - support) * np.log((1.0 - p_hit) / (1.0 - c))
+    return support, llr
+
+
 @numba.njit(cache=True)
 def _verify_njit(
     pop: np.ndarray,
@@ -1318,10 +1375,8 @@ def _verify_njit(
     log-likelihood ratio of the evidence under "the court is here" against chance."""
     h, w = ignore.shape
     max_sample_px = MAX_SAMPLE_SHARE_OF_DIAGONAL * np.sqrt(h * h + w * w)
-    n_bins = chance.shape[0]
     r = np.empty((3, 3))
     t = np.empty(3)
-    inv_tol2 = 1.0 / (tolerance * tolerance)
     for i in range(pop.shape[0]):
         g = pop[i]
         extrinsics_njit(g, r, t)
@@ -1331,19 +1386,8 @@ def _verify_njit(
         total = 0.0
         for j in range(points.shape[0]):
             x, y, z = points[j, 0], points[j, 1], points[j, 2]
-            u, v, depth = project_point_njit(r, t, g, x, y, z)
-            if depth <= 0.05:
-                continue
-            # beyond the lens fold the polynomial maps points back into the picture as ghosts
-            xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
-            yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
-            if (xc * xc + yc * yc) > fold_tan2[i] * depth * depth:
-                continue
-            if not (0.0 <= u <= w - 1.0 and 0.0 <= v <= h - 1.0):
-                continue
-            iu = int(u + 0.5)
-            iv = int(v + 0.5)
-            if ignore[iv, iu]:
+            u, v, iu, iv, seen = seen_pixel_njit(r, t, g, x, y, z, fold_tan2[i], ignore)
+            if not seen:
                 continue
             u2, v2, depth2 = project_point_njit(
                 r,
@@ -1356,45 +1400,33 @@ def _verify_njit(
             du = u2 - u
             dv = v2 - v
             step_px = np.sqrt(du * du + dv * dv)
-            if depth2 <= 0.05 or step_px == 0.0:
+            if depth2 <= MIN_SAMPLE_DEPTH_M or step_px == 0.0:
                 continue
             # one lookup stands for this much line: a camera with a line grazing its lens must
             # not win on a few lookups that stand for thousands of pixels
             length_px = min(step_px * (spacing_m / step_m), max_sample_px)
             e = edge[j]
             visible[i, e] += length_px
-            p_hit = p_hits[j]
-            if painted[j]:
-                d = dist_ridge[iv, iu]
-                k = near_ridge[iv, iu]
-            else:
-                d = dist_any[iv, iu]
-                k = near_any[iv, iu]
-            support = 0.0
-            # the evidence must run the same way: its normal across the model line's direction
-            if (
-                k >= 0
-                and d <= tolerance
-                and abs(normals[k, 0] * du + normals[k, 1] * dv) <= max_sin * step_px
-            ):
-                support = 1.0 - d * d * inv_tol2
-                supported[i, e] += length_px * support
-            # chance of support here for a line with this normal (bins interpolated)
-            angle = np.arctan2(du, -dv)
-            if angle < 0.0:
-                angle += np.pi
-            pos = angle * n_bins / np.pi - 0.5
-            b0 = int(np.floor(pos))
-            frac = pos - b0
-            b1 = (b0 + 1) % n_bins
-            b0 = b0 % n_bins
-            cu = min(iu // chance_scale, chance.shape[2] - 1)
-            cv = min(iv // chance_scale, chance.shape[1] - 1)
-            c = (1.0 - frac) * chance[b0, cv, cu] + frac * chance[b1, cv, cu]
-            weight = length_px / tolerance
-            total += weight * (
-                support * np.log(p_hit / c) + (1.0 - support) * np.log((1.0 - p_hit) / (1.0 - c))
+            support, sample_llr = _sample_evidence(
+                iu,
+                iv,
+                du,
+                dv,
+                step_px,
+                painted[j],
+                p_hits[j],
+                dist_ridge,
+                near_ridge,
+                dist_any,
+                near_any,
+                normals,
+                tolerance,
+                max_sin,
+                chance,
+                chance_scale,
             )
+            supported[i, e] += length_px * support
+            total += (length_px / tolerance) * sample_llr
         llr[i] = total
 
 
@@ -1470,11 +1502,9 @@ def _coarse_njit(
     each sample's line direction and length taken from the previous sample of its edge (one
     projection per sample instead of two)."""
     h, w = ignore.shape
-    n_bins = chance.shape[0]
     max_sample_px = 2.0 * MAX_SAMPLE_SHARE_OF_DIAGONAL * np.sqrt(h * h + w * w)
     r = np.empty((3, 3))
     t = np.empty(3)
-    inv_tol2 = 1.0 / (tolerance * tolerance)
     for i in range(pop.shape[0]):
         g = pop[i]
         extrinsics_njit(g, r, t)
@@ -1484,7 +1514,7 @@ def _coarse_njit(
         previous_ok = False
         for j in range(points.shape[0]):
             u, v, depth = project_point_njit(r, t, g, points[j, 0], points[j, 1], points[j, 2])
-            ok = depth > 0.05 and 0.0 <= u <= w - 1.0 and 0.0 <= v <= h - 1.0
+            ok = depth > MIN_SAMPLE_DEPTH_M and 0.0 <= u <= w - 1.0 and 0.0 <= v <= h - 1.0
             if ok and previous_ok and same_edge_as_previous[j]:
                 du = u - pu
                 dv = v - pv
@@ -1493,34 +1523,25 @@ def _coarse_njit(
                 iv = int(v + 0.5)
                 if step > 0.0 and not ignore[iv, iu]:
                     length = min(step, max_sample_px)
-                    if painted[j]:
-                        d = dist_ridge[iv, iu]
-                        k = near_ridge[iv, iu]
-                    else:
-                        d = dist_any[iv, iu]
-                        k = near_any[iv, iu]
-                    support = 0.0
-                    if (
-                        k >= 0
-                        and d <= tolerance
-                        and abs(normals[k, 0] * du + normals[k, 1] * dv) <= max_sin * step
-                    ):
-                        support = 1.0 - d * d * inv_tol2
-                    angle = np.arctan2(du, -dv)
-                    if angle < 0.0:
-                        angle += np.pi
-                    pos = angle * n_bins / np.pi - 0.5
-                    b0 = int(np.floor(pos))
-                    frac = pos - b0
-                    b1 = (b0 + 1) % n_bins
-                    b0 = b0 % n_bins
-                    cu = min(iu // chance_scale, chance.shape[2] - 1)
-                    cv = min(iv // chance_scale, chance.shape[1] - 1)
-                    c = (1.0 - frac) * chance[b0, cv, cu] + frac * chance[b1, cv, cu]
-                    p = p_hits[j]
-                    total += (length / tolerance) * (
-                        support * np.log(p / c) + (1.0 - support) * np.log((1.0 - p) / (1.0 - c))
+                    _, sample_llr = _sample_evidence(
+                        iu,
+                        iv,
+                        du,
+                        dv,
+                        step,
+                        painted[j],
+                        p_hits[j],
+                        dist_ridge,
+                        near_ridge,
+                        dist_any,
+                        near_any,
+                        normals,
+                        tolerance,
+                        max_sin,
+                        chance,
+                        chance_scale,
                     )
+                    total += (length / tolerance) * sample_llr
             previous_ok = ok
             pu = u
             pv = v
