@@ -1,5 +1,5 @@
 """The search finds the court from no start camera in the filming classes of bench.synthetic:
-one held-out case per class that the benchmark found (seeds 1000+), judged as the benchmark judges
+one case per class that the benchmark found (seeds 1000+), judged as the benchmark judges
 (floor grid median <= 5 cm, court lines <= 2 px RMS, accepted by the verdict)."""
 
 import pytest
@@ -12,9 +12,12 @@ from bench.synthetic import run_case
     ("class_name", "seed"),
     [
         ("broadcast_glass", 1001),
+        ("club", 1004),
         ("tripod_phone", 1002),
+        ("wide_angle", 1003),
         ("corner_side", 1004),
         ("zoomed", 1007),
+        ("anamorphic_cropped", 1001),
         ("clip", 1011),
     ],
 )
