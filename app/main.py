@@ -108,6 +108,13 @@ def create_app(settings: Settings | None = None, warm_up: bool = False) -> FastA
     return app
 
 
+def served_app() -> FastAPI:
+    """The app `squashcal serve` runs in each API process: settings from the environment, the
+    kernels loaded at start (unless SQUASHCAL_WARM_UP=0)."""
+    settings = get_settings()
+    return create_app(settings, warm_up=settings.warm_up)
+
+
 def _freeze_startup_objects() -> None:
     """Move every object alive now (modules, the app, compiled kernels: ~200 000 of them, kept
     for the life of the process) out of the garbage collector's sight. Without this each full
