@@ -9,10 +9,16 @@ import argparse
 import os
 import signal
 import sys
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    import socket
+
     from app.settings import Settings
+    from app.supervisor import Supervisor
+
+DEFAULT_APP_FACTORY = "app.main:served_app"
 
 
 def add_arguments(command: str, parser: argparse.ArgumentParser) -> None:
@@ -23,6 +29,25 @@ def add_arguments(command: str, parser: argparse.ArgumentParser) -> None:
         parser.add_argument(
             "--workers", type=int, default=1, help="worker processes to start (default 1)"
         )
+        parser.add_argument(
+            "--api-workers",
+            type=_positive,
+            default=1,
+            help="API processes sharing the port (SO_REUSEPORT; default 1)",
+        )
+    if command == "serve":
+        parser.add_argument(
+            "--workers",
+            type=_positive,
+            default=1,
+            help="API processes sharing the port, each supervised (SO_REUSEPORT; default 1)",
+        )
+        parser.add_argument("--log-level", default="info", help="uvicorn log level")
+        parser.add_argument("--no-access-log", action="store_true", help="no line per request")
+        # internal: one of several API processes on one port (what --workers starts)
+        parser.add_argument("--reuse-port", action="store_true", help=argparse.SUPPRESS)
+        # benchmarks: serve another app factory (module:function) the same way
+        parser.add_argument("--app-factory", default=DEFAULT_APP_FACTORY, help=argparse.SUPPRESS)
     if command == "worker":
         parser.add_argument(
             "--once", action="store_true", help="process at most one job, then exit"
@@ -49,7 +74,9 @@ def run(command: str, args: argparse.Namespace) -> int:
     if command == "migrate":
         return _migrate(settings)
     if command == "serve":
-        return _serve(settings, args.host, args.port)
+        if args.workers > 1:
+            return _serve_many(settings, args)
+        return _serve(settings, args)
     if command == "worker":
         from worker.main import run_worker
 
@@ -57,7 +84,7 @@ def run(command: str, args: argparse.Namespace) -> int:
     if command == "keys":
         return _keys(settings, args)
     if command == "run":
-        return _run_all(settings, args.host, args.port, args.workers)
+        return _run_all(settings, args.host, args.port, args.workers, args.api_workers)
     raise ValueError(f"unknown command {command!r}")
 
 
@@ -69,19 +96,100 @@ def _migrate(settings: Settings) -> int:
     return 0
 
 
-def _serve(settings: Settings, host: str | None, port: int | None) -> int:
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError("must be at least 1")
+    return value
+
+
+def _serve(settings: Settings, args: argparse.Namespace) -> int:
+    """One API process (the app from `--app-factory`); with `--reuse-port` it shares the port
+    with the other API processes of `serve --workers N`."""
     import uvicorn
 
-    from app.main import create_app
-
-    uvicorn.run(
-        create_app(settings, warm_up=settings.warm_up),
-        host=host or settings.host,
-        port=port or settings.port,
-        log_level="info",
+    host = args.host or settings.host
+    port = args.port or settings.port
+    config = uvicorn.Config(
+        args.app_factory,
+        factory=True,
+        host=host,
+        port=port,
+        log_level=args.log_level,
+        access_log=not args.no_access_log,
         # SIGTERM: stop accepting, finish in-flight requests (uploads) for up to this long
         timeout_graceful_shutdown=30,
     )
+    server = uvicorn.Server(config)
+    sockets = [reuse_port_socket(host, port)] if args.reuse_port else None
+    server.run(sockets=sockets)
+    return 0
+
+
+def reuse_port_socket(host: str, port: int) -> socket.socket:
+    """A listening TCP socket with SO_REUSEPORT: each API process binds its own on one port and
+    the kernel spreads new connections over them (by a hash of the client's address and port).
+    Only processes of the same user can join the port."""
+    import socket
+
+    family, kind, proto, _, address = socket.getaddrinfo(
+        host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+    )[0]
+    sock = socket.socket(family, kind, proto)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+    if family == socket.AF_INET6:
+        sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 0)
+    sock.bind(address)
+    sock.listen(2048)
+    sock.set_inheritable(True)
+    return sock
+
+
+def api_process_argv(
+    host: str, port: int, extra: Sequence[str] = (), reuse_port: bool = False
+) -> list[str]:
+    argv = [sys.executable, "-m", "app.cli", "serve", "--host", host, "--port", str(port)]
+    return argv + (["--reuse-port"] if reuse_port else []) + list(extra)
+
+
+def _serve_many(settings: Settings, args: argparse.Namespace) -> int:
+    """`serve --workers N`: N API processes on one port (SO_REUSEPORT), each restarted with
+    backoff if it exits, all stopped on SIGTERM/SIGINT."""
+    from app.supervisor import Supervisor
+
+    host = args.host or settings.host
+    port = args.port or settings.port
+    extra = ["--log-level", args.log_level, "--app-factory", args.app_factory]
+    if args.no_access_log:
+        extra.append("--no-access-log")
+    children = {
+        f"api-{i + 1}": api_process_argv(host, port, extra, reuse_port=True)
+        for i in range(args.workers)
+    }
+    supervisor = Supervisor(
+        children,
+        env=os.environ.copy(),
+        say=lambda message: print(f"squashcal serve: {message}", flush=True),
+    )
+    return _supervise(supervisor, settings, banner=None)
+
+
+def _supervise(supervisor: Supervisor, settings: Settings, banner: str | None) -> int:
+    def _stop(signum: int, frame: object) -> None:
+        supervisor.stop()
+
+    signal.signal(signal.SIGTERM, _stop)
+    signal.signal(signal.SIGINT, _stop)
+    supervisor.start()
+    if banner:
+        print(banner, flush=True)
+    try:
+        supervisor.run()
+    finally:
+        # workers get their grace period to finish or give back their jobs; API processes
+        # theirs to finish requests in flight
+        supervisor.terminate_all(timeout_s=max(settings.shutdown_grace_s, 30) + 10)
     return 0
 
 
@@ -115,17 +223,22 @@ def _keys(settings: Settings, args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_all(settings: Settings, host: str | None, port: int | None, n_workers: int) -> int:
-    """Migrate, start `n_workers` worker processes and the API, restart any that exits (with
-    backoff); stop them all on Ctrl-C/SIGTERM."""
+def _run_all(
+    settings: Settings, host: str | None, port: int | None, n_workers: int, n_api: int = 1
+) -> int:
+    """Migrate, start `n_workers` worker processes and `n_api` API processes (sharing the port),
+    restart any that exits (with backoff); stop them all on Ctrl-C/SIGTERM."""
     from app.supervisor import Supervisor
 
     _migrate(settings)
     host = host or settings.host
     port = port or settings.port
-    children = {
-        "api": [sys.executable, "-m", "app.cli", "serve", "--host", host, "--port", str(port)]
-    }
+    if n_api == 1:
+        children = {"api": api_process_argv(host, port)}
+    else:
+        children = {
+            f"api-{i + 1}": api_process_argv(host, port, reuse_port=True) for i in range(n_api)
+        }
     for i in range(max(0, n_workers)):
         children[f"worker-{i + 1}"] = [sys.executable, "-m", "worker"]
     supervisor = Supervisor(
@@ -133,27 +246,15 @@ def _run_all(settings: Settings, host: str | None, port: int | None, n_workers: 
         env=os.environ.copy(),
         say=lambda message: print(f"squashcal run: {message}", flush=True),
     )
-
-    def _stop(signum: int, frame: object) -> None:
-        supervisor.stop()
-
-    signal.signal(signal.SIGTERM, _stop)
-    signal.signal(signal.SIGINT, _stop)
-    supervisor.start()
     shown_host = "127.0.0.1" if host in ("0.0.0.0", "::") else host
-    print(
+    banner = (
         f"\nsquashcal API on http://{shown_host}:{port}  (OpenAPI: /docs, upload page: /)\n"
-        f"{n_workers} worker process(es) running; data in {settings.data_dir.resolve()}\n"
+        f"{n_api} API process(es), {n_workers} worker process(es) running; "
+        f"data in {settings.data_dir.resolve()}\n"
         "authenticate with an API key:  .venv/bin/squashcal keys create --name me\n"
-        "  then send 'Authorization: Bearer <key>' (the last line that command prints)\n",
-        flush=True,
+        "  then send 'Authorization: Bearer <key>' (the last line that command prints)\n"
     )
-    try:
-        supervisor.run()
-    finally:
-        # workers get their grace period to finish or give back their jobs
-        supervisor.terminate_all(timeout_s=settings.shutdown_grace_s + 10)
-    return 0
+    return _supervise(supervisor, settings, banner)
 
 
 def _safe_url(url: str) -> str:

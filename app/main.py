@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import logging
 import threading
 from collections.abc import AsyncIterator
@@ -23,7 +24,7 @@ from app.db.migrate import head_revision
 from app.db.session import make_engine, make_sessionmaker
 from app.media.store import media_store
 from app.media.sweep import sweep_quietly
-from app.schemas import ErrorResponse
+from app.schemas import ErrorResponse, ProjectRequest
 from app.settings import Settings, get_settings
 
 log = logging.getLogger("squashcal.api")
@@ -37,12 +38,14 @@ async def _sweep_media_forever(settings: Settings, sessions: sessionmaker[Sessio
         await asyncio.sleep(settings.media_sweep_interval_s)
 
 
-def error_schemas() -> dict[str, object]:
-    """ErrorResponse and ErrorDetail as OpenAPI component schemas."""
+def component_schemas() -> dict[str, object]:
+    """OpenAPI component schemas FastAPI does not derive from the routes: ErrorResponse and
+    ErrorDetail, and the bodies read by `app.api.json_body` (ProjectRequest)."""
     from pydantic.json_schema import models_json_schema
 
     _, top = models_json_schema(
-        [(ErrorResponse, "serialization")], ref_template="#/components/schemas/{model}"
+        [(ErrorResponse, "serialization"), (ProjectRequest, "validation")],
+        ref_template="#/components/schemas/{model}",
     )
     return dict(top["$defs"])
 
@@ -73,6 +76,7 @@ def create_app(settings: Settings | None = None, warm_up: bool = False) -> FastA
             ).start()
         else:
             state.kernels_ready.set()
+        _freeze_startup_objects()
         try:
             yield
         finally:
@@ -82,6 +86,7 @@ def create_app(settings: Settings | None = None, warm_up: bool = False) -> FastA
                     await task
             # a refresh already running in its thread outlives the cancelled task: let it end
             await asyncio.to_thread(state.cameras.wait_idle)
+            state.keys.close()
             engine.dispose()
 
     app = FastAPI(
@@ -99,12 +104,29 @@ def create_app(settings: Settings | None = None, warm_up: bool = False) -> FastA
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_json_body_bytes)
     app.add_middleware(SecurityHeadersMiddleware)
     app.include_router(api_router)
-    install_openapi(app, error_schemas())
+    install_openapi(app, component_schemas())
     return app
+
+
+def served_app() -> FastAPI:
+    """The app `squashcal serve` runs in each API process: settings from the environment, the
+    kernels loaded at start (unless SQUASHCAL_WARM_UP=0)."""
+    settings = get_settings()
+    return create_app(settings, warm_up=settings.warm_up)
+
+
+def _freeze_startup_objects() -> None:
+    """Move every object alive now (modules, the app, compiled kernels: ~200 000 of them, kept
+    for the life of the process) out of the garbage collector's sight. Without this each full
+    collection walks them all: a request that creates a few thousand lists (1000 points) then
+    costs about twice its own work in collections."""
+    gc.collect()
+    gc.freeze()
 
 
 def _warm_kernels(state: AppState) -> None:
     from app.calib import warmup
 
     warmup.warm_up_best_effort(warmup.API_PARTS)
+    _freeze_startup_objects()  # the kernels' objects too
     state.kernels_ready.set()

@@ -124,3 +124,63 @@ def test_camera_json_errors_are_clear():
                 "tvec": [0] * 3,
             }
         )
+
+
+def _pixel_to_floor_reference(g: np.ndarray, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The vectorised numpy formulation (undistort, rotate the rays, meet z = 0) that the fused
+    kernel replaced: an independent check of it."""
+    xd = (pixels[:, 0] - g[2]) / g[0]
+    yd = (pixels[:, 1] - g[3]) / g[1]
+    x, y, ok = camera.undistort_normalized(xd, yd, g[camera.DISTORTION_GENES])
+    r, t = camera.court_extrinsics(g)
+    centre = -r[0].T @ t[0]
+    rays = np.stack([x, y, np.ones_like(x)], axis=1) @ r[0]
+    with np.errstate(all="ignore"):
+        s = -centre[2] / rays[:, 2]
+    hits = centre[None, :2] + s[:, None] * rays[:, :2]
+    status = np.where(
+        ~ok,
+        camera.RAY_UNDISTORT_FAILED,
+        np.where(np.isfinite(s) & (s > 0), camera.RAY_OK, camera.RAY_MISSES_FLOOR),
+    )
+    hits[status != camera.RAY_OK] = np.nan
+    return hits, status
+
+
+def test_prepared_camera_matches_the_numpy_formulation(target_genome):
+    rng = np.random.default_rng(11)
+    # pixels inside and far outside the picture: every status occurs
+    pixels = rng.uniform([-3000, -3000], [5000, 4000], (2000, 2))
+    seen: set[int] = set()
+    for g in random_cameras(rng, 8, target_genome):
+        prepared = camera.PreparedCamera(g)
+        got, status = prepared.pixel_to_floor(pixels)
+        want, want_status = _pixel_to_floor_reference(g, pixels)
+        np.testing.assert_array_equal(status, want_status)
+        ok = status == camera.RAY_OK
+        np.testing.assert_allclose(got[ok], want[ok], rtol=1e-9, atol=1e-9)
+        assert np.isnan(got[~ok]).all()
+        seen |= set(status.tolist())
+        # the module function is the same mapping
+        again, again_status = camera.pixel_to_floor(g, pixels)
+        np.testing.assert_array_equal(again_status, status)
+        np.testing.assert_array_equal(again[ok], got[ok])
+    assert seen == {camera.RAY_OK, camera.RAY_UNDISTORT_FAILED, camera.RAY_MISSES_FLOOR}
+
+
+def test_prepared_camera_is_immutable_and_empty_input_is_fine(target_genome):
+    g = target_genome.copy()
+    prepared = camera.PreparedCamera(g)
+    g[0] += 100.0  # the caller's array is not shared
+    assert prepared.genome[0] == target_genome[0]
+    for array in (prepared.genome, prepared.r, prepared.t, prepared.centre):
+        assert not array.flags.writeable
+    floor, status = prepared.pixel_to_floor(np.empty((0, 2)))
+    assert floor.shape == (0, 2) and status.shape == (0,)
+
+
+def test_the_projection_kernels_release_the_gil():
+    # /project (and the per-calibration mappings) run these; without nogil a request's
+    # kernel would block every other thread of the API process
+    for kernel in (camera._pixels_to_plane_njit, camera._undistort_njit):
+        assert kernel.targetoptions.get("nogil") is True, kernel

@@ -31,11 +31,11 @@ from sqlalchemy import Engine
 
 from app import media
 from app.calib import warmup
-from app.calib.background import ClipError, background_from_clip, background_from_frames
+from app.calib.background import ClipError, background_from_bands, background_from_clip
 from app.db import queue
 from app.db.models import Calibration, JobStage, new_id
 from app.db.session import make_engine
-from app.media import MediaError, load_frames
+from app.media import MediaError, job_paths, spool_images
 from app.settings import Settings
 from worker.errors import Failure, classify
 
@@ -303,7 +303,8 @@ def _background(
     """The upload's player-free background, its moving mask, and what it was made from.
 
     A clip: from its longest static view (`background_from_clip`); the info records the shots
-    and the time ranges used.
+    and the time ranges used. Images: decoded one at a time into a FrameSpool (a temporary file)
+    and estimated a band of rows at a time, so memory does not grow with the upload.
     """
     if job.media_kind == "video":
         path = media.job_dir(settings, job.id) / job.media_files[0]
@@ -319,9 +320,12 @@ def _background(
             )
         except ClipError as exc:
             raise MediaError(exc.code, str(exc)) from exc
-    frames = load_frames(settings, job.id, job.media_kind, job.media_files)
-    background, moving_mask = background_from_frames(frames)
-    return background, moving_mask, {"frames_used": len(frames)}
+    paths = job_paths(settings, job.id, job.media_files)
+    with spool_images(paths, settings) as spool:
+        background, moving_mask = background_from_bands(
+            spool.n_frames, spool.height, spool.width, spool.read_rows
+        )
+        return background, moving_mask, {"frames_used": spool.n_frames}
 
 
 def _rounded(timings: dict[str, float]) -> dict[str, float]:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter
 
 from app.api import (
     calibrations,
@@ -18,11 +18,16 @@ from app.api import (
     project,
     ui,
 )
-from app.api.deps import reject_unknown_query
 
-api_router = APIRouter(dependencies=[Depends(reject_unknown_query)])
-for module in (health, courts, calibrations, jobs, project, ui, docs):
-    api_router.include_router(module.router)
-# the browser page's resources (issue 7)
-for module in (me, court_jobs, cameras, pictures, demo):
+# /project first: routes are matched in order, and it is the hot path (issue 8); then the
+# browser page's resources (issue 7). Every module's router uses app.api.routing.ApiRoute.
+ROUTER_MODULES = (project, health, courts, calibrations, jobs, ui, docs) + (
+    me,
+    court_jobs,
+    cameras,
+    pictures,
+    demo,
+)
+api_router = APIRouter()
+for module in ROUTER_MODULES:
     api_router.include_router(module.router)

@@ -13,6 +13,7 @@ from app import media
 from app.api import uploads
 from app.api.deps import SessionDep, StateDep, TenantDep
 from app.api.errors import ApiError
+from app.api.routing import ApiRoute
 from app.api.serialize import calibration_out
 from app.db import repo
 from app.db.models import Calibration, Court, new_id
@@ -20,7 +21,7 @@ from app.media import probe
 from app.schemas import CalibrationOut, ErrorResponse, JobAccepted
 from app.settings import Settings
 
-router = APIRouter(tags=["calibrations"])
+router = APIRouter(tags=["calibrations"], route_class=ApiRoute)
 
 _UPLOAD_FORM: dict[str, Any] = {
     "requestBody": {

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from sqlalchemy.orm import Session
 
+from app.calib.camera import PreparedCamera
 from app.calib.court import get_spec
 from app.db import repo
 from app.db.models import Calibration, Court
@@ -42,6 +43,8 @@ class CachedCamera:
     court_id: str
     calibration_id: str | None  # None: the court has no calibration yet
     genome: np.ndarray | None  # (15,)
+    # built once per calibration (calibrations never change): a request pays only for its points
+    camera: PreparedCamera | None
     image_size: tuple[int, int] | None
     court_width_m: float
     court_length_m: float
@@ -59,13 +62,23 @@ class CameraCache:
 
     def get(self, tenant_id: str, court_id: str) -> CachedCamera:
         """The court's camera entry; loads it on a miss. Raises repo.NotFound for other tenants."""
+        entry = self.peek(tenant_id, court_id)
+        if entry is None:
+            entry = self._load(tenant_id, court_id)
+            if entry.tenant_id != tenant_id:
+                raise repo.NotFound("court", court_id)
+        return entry
+
+    def peek(self, tenant_id: str, court_id: str) -> CachedCamera | None:
+        """The cached entry if it is fresh, without any database work (safe on the event loop);
+        None when `get` would have to load it. Raises repo.NotFound for other tenants' courts."""
         now = time.monotonic()
         with self._lock:
             entry = self._entries.get(court_id)
             if entry is not None:
                 self._entries.move_to_end(court_id)
         if entry is None or now - entry.checked_at > STALE_AFTER_INTERVALS * self.refresh_s:
-            entry = self._load(tenant_id, court_id)
+            return None
         if entry.tenant_id != tenant_id:
             raise repo.NotFound("court", court_id)
         return entry
@@ -85,12 +98,13 @@ class CameraCache:
     ) -> CachedCamera:
         court_spec = get_spec(spec)
         genome = None
+        prepared = None
         image_size = None
         if calibration_id is not None:
             cal = session.get(Calibration, calibration_id)
             if cal is not None:
-                genome = np.asarray(cal.genome, dtype=np.float64)
-                genome.setflags(write=False)
+                prepared = PreparedCamera(np.asarray(cal.genome, dtype=np.float64))
+                genome = prepared.genome  # read-only
                 image_size = (cal.image_width, cal.image_height)
             else:
                 calibration_id = None
@@ -99,6 +113,7 @@ class CameraCache:
             court_id=court_id,
             calibration_id=calibration_id,
             genome=genome,
+            camera=prepared,
             image_size=image_size,
             court_width_m=court_spec.width_m,
             court_length_m=court_spec.length_m,

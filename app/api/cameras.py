@@ -14,6 +14,7 @@ from fastapi.responses import Response
 
 from app.api.deps import SessionDep, TenantDep
 from app.api.errors import ApiError
+from app.api.routing import ApiRoute
 from app.api.serialize import calibration_out
 from app.calib import camera
 from app.db import repo
@@ -21,7 +22,7 @@ from app.db.models import Calibration, Court
 from app.schemas import ActivateCamera, CalibrationOut, CameraImport, ErrorResponse
 from app.viewer.camera_text import opencv_yaml
 
-router = APIRouter(tags=["cameras"])
+router = APIRouter(tags=["cameras"], route_class=ApiRoute)
 
 _ERRORS: dict[int | str, dict[str, Any]] = {
     code: {"model": ErrorResponse} for code in (401, 404, 422)

@@ -7,11 +7,12 @@ from typing import Annotated
 from fastapi import APIRouter, Query
 
 from app.api.deps import SessionDep, TenantDep
+from app.api.routing import ApiRoute
 from app.api.serialize import job_out
 from app.db import repo
 from app.schemas import JobList
 
-router = APIRouter(tags=["jobs"])
+router = APIRouter(tags=["jobs"], route_class=ApiRoute)
 
 
 @router.get("/courts/{court_id}/jobs", response_model=JobList)

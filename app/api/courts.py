@@ -8,12 +8,13 @@ from fastapi import APIRouter, Query
 
 from app.api.deps import SessionDep, TenantDep
 from app.api.errors import ApiError
+from app.api.routing import ApiRoute
 from app.api.serialize import calibration_out, court_out
 from app.db import repo
 from app.db.models import Court
 from app.schemas import CalibrationList, CalibrationOut, CourtCreate, CourtList, CourtOut
 
-router = APIRouter(prefix="/courts", tags=["courts"])
+router = APIRouter(prefix="/courts", tags=["courts"], route_class=ApiRoute)
 
 
 @router.post("", status_code=201, response_model=CourtOut)

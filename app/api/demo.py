@@ -12,10 +12,11 @@ from fastapi.responses import FileResponse
 from starlette.concurrency import run_in_threadpool
 
 from app.api.deps import StateDep, TenantDep
+from app.api.routing import ApiRoute
 from app.calib import scene, synthetic
 from app.schemas import ErrorResponse
 
-router = APIRouter(tags=["demo"])
+router = APIRouter(tags=["demo"], route_class=ApiRoute)
 
 DEMO_SIZE = (1280, 720)
 DEMO_FRAMES = 40

@@ -5,10 +5,11 @@ from __future__ import annotations
 import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Annotated, Any
+from typing import Annotated
 
+from anyio import to_thread
 from fastapi import Depends, Request
-from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from fastapi.security import HTTPBearer
 from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -30,7 +31,11 @@ class AppState:
     kernels_ready: threading.Event = field(default_factory=threading.Event)
 
 
-def get_state(request: Request) -> AppState:
+# Dependencies that do no blocking work are `async def`: FastAPI runs a plain `def` dependency in
+# its thread pool, and on the /project path each such hop cost more than the work itself.
+
+
+async def get_state(request: Request) -> AppState:
     state: AppState = request.app.state.squashcal
     return state
 
@@ -45,58 +50,64 @@ def get_session(state: StateDep) -> Iterator[Session]:
 
 SessionDep = Annotated[Session, Depends(get_session)]
 
-_bearer = HTTPBearer(auto_error=False, description="an API key from `squashcal keys create`")
 _UNAUTHORIZED_HEADERS = {"WWW-Authenticate": "Bearer"}
 
 
-def get_tenant(
-    state: StateDep,
-    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)],
-) -> str:
-    """The caller's tenant id from `Authorization: Bearer KEY`.
+@dataclass(frozen=True)
+class Caller:
+    """An authenticated request's tenant, with the process's state."""
+
+    state: AppState
+    tenant_id: str
+
+
+class ApiKeyAuth(HTTPBearer):
+    """`Authorization: Bearer KEY` -> the caller's tenant (a Caller), as ONE dependency.
+
+    It is FastAPI's HTTPBearer (so the OpenAPI document declares the same `HTTPBearer` scheme)
+    that also looks the key up: each dependency FastAPI resolves costs microseconds on every
+    request, and /project's budget is counted in them.
 
     Looked up on every request, on purpose: a revoked key must be refused at once by every API
     process, and no cache can promise that without a message from the database. The lookup is one
-    indexed read of a unique column (~45 us on SQLite, one round trip on PostgreSQL): see
-    `repo.KeyLookup`.
+    indexed read of a unique column (a few us on SQLite, one round trip on PostgreSQL): see
+    `repo.KeyLookup`. On SQLite (a local file, no network) it runs on the event loop: handing it
+    to a thread costs more than the read (and under load the GIL hand-over adds milliseconds of
+    tail latency). A networked database's round trip goes to a thread, so that a slow database
+    never stalls the loop.
     """
-    if credentials is None or not credentials.credentials:
-        raise ApiError(
-            401,
-            "unauthorized",
-            "missing API key: send 'Authorization: Bearer <key>'",
-            _UNAUTHORIZED_HEADERS,
-        )
-    tenant_id = state.keys.tenant_for(credentials.credentials)
-    if tenant_id is None:
-        raise ApiError(401, "unauthorized", "invalid or revoked API key", _UNAUTHORIZED_HEADERS)
-    return tenant_id
+
+    async def __call__(self, request: Request) -> Caller:  # type: ignore[override]
+        credentials = await super().__call__(request)
+        if credentials is None or not credentials.credentials:
+            raise ApiError(
+                401,
+                "unauthorized",
+                "missing API key: send 'Authorization: Bearer <key>'",
+                _UNAUTHORIZED_HEADERS,
+            )
+        state: AppState = request.app.state.squashcal
+        if state.keys.local:
+            tenant_id = state.keys.tenant_for(credentials.credentials)
+        else:
+            tenant_id = await to_thread.run_sync(state.keys.tenant_for, credentials.credentials)
+        if tenant_id is None:
+            raise ApiError(401, "unauthorized", "invalid or revoked API key", _UNAUTHORIZED_HEADERS)
+        return Caller(state, tenant_id)
+
+
+get_caller = ApiKeyAuth(
+    auto_error=False,
+    description="an API key from `squashcal keys create`",
+    scheme_name="HTTPBearer",
+)
+
+CallerDep = Annotated[Caller, Depends(get_caller)]
+
+
+async def get_tenant(caller: CallerDep) -> str:
+    """The caller's tenant id (`get_caller`)."""
+    return caller.tenant_id
 
 
 TenantDep = Annotated[str, Depends(get_tenant)]
-
-
-def reject_unknown_query(request: Request) -> None:
-    """422 for a query parameter the operation does not have: a misspelt `limt=5` is silently
-    ignored otherwise, and the caller never learns why the limit did not apply."""
-    route = request.scope.get("route")
-    dependant = getattr(route, "dependant", None)
-    # the browser page and its files are not API operations: links may carry any query
-    if dependant is None or not request.query_params or not route.include_in_schema:  # type: ignore[union-attr]
-        return
-    known = {p.alias for p in _query_params(dependant)}
-    unknown = sorted(set(request.query_params) - known)
-    if unknown:
-        expected = ", ".join(sorted(known)) or "none"
-        raise ApiError(
-            422,
-            "unknown_query_parameter",
-            f"unknown query parameter(s) {', '.join(unknown)}; this operation takes: {expected}",
-        )
-
-
-def _query_params(dependant: Any) -> list[Any]:
-    params = list(dependant.query_params)
-    for sub in dependant.dependencies:
-        params += _query_params(sub)
-    return params

@@ -15,6 +15,7 @@ from fastapi import APIRouter
 from fastapi.responses import FileResponse, HTMLResponse
 
 from app.api.errors import ApiError
+from app.api.routing import ApiRoute
 
 SWAGGER_DIR = Path(str(resources.files("fastapi_offline") / "static"))
 INIT_SCRIPT = Path(__file__).resolve().parents[1] / "static" / "docs" / "init.js"
@@ -45,7 +46,7 @@ DOCS_HTML = """<!doctype html>
 </html>
 """
 
-router = APIRouter(include_in_schema=False)
+router = APIRouter(include_in_schema=False, route_class=ApiRoute)
 
 
 @router.get("/docs")

@@ -7,10 +7,11 @@ from starlette.concurrency import run_in_threadpool
 
 from app.api.deps import StateDep
 from app.api.errors import ApiError
+from app.api.routing import ApiRoute
 from app.db.migrate import current_revision
 from app.schemas import Health, Ready
 
-router = APIRouter(tags=["health"])
+router = APIRouter(tags=["health"], route_class=ApiRoute)
 
 
 @router.get("/healthz", response_model=Health)

@@ -5,12 +5,13 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from app.api.deps import SessionDep, TenantDep
+from app.api.routing import ApiRoute
 from app.api.serialize import job_out
 from app.db import repo
 from app.db.models import Job
 from app.schemas import JobOut
 
-router = APIRouter(prefix="/jobs", tags=["jobs"])
+router = APIRouter(prefix="/jobs", tags=["jobs"], route_class=ApiRoute)
 
 
 @router.get("/{job_id}", response_model=JobOut)

@@ -5,11 +5,12 @@ from __future__ import annotations
 from fastapi import APIRouter, Request
 
 from app.api.deps import SessionDep, TenantDep
+from app.api.routing import ApiRoute
 from app.db import repo
 from app.db.models import Tenant
 from app.schemas import Me
 
-router = APIRouter(tags=["me"])
+router = APIRouter(tags=["me"], route_class=ApiRoute)
 
 
 @router.get("/me", response_model=Me)

@@ -40,7 +40,7 @@ def error_statuses(path: str, method: str, operation: dict[str, Any]) -> set[int
         statuses |= {401, 503}
     if "{" in path or path == "/project":
         statuses.add(404)
-    statuses.add(422)  # at least an unknown query parameter (deps.reject_unknown_query)
+    statuses.add(422)  # at least an unknown query parameter (routing.ApiRoute)
     if "application/json" in content:
         statuses |= {400, 413}
     if "multipart/form-data" in content:

@@ -21,6 +21,7 @@ from app import media
 from app.api.deps import SessionDep, StateDep, TenantDep
 from app.api.errors import ApiError
 from app.api.project import floor_points_response, image_points_response
+from app.api.routing import ApiRoute
 from app.calib import camera, render
 from app.calib.court import court_model, get_spec
 from app.db import repo
@@ -37,7 +38,7 @@ from app.schemas import (
 from app.settings import Settings
 from app.viewer import pictures
 
-router = APIRouter(tags=["pictures"])
+router = APIRouter(tags=["pictures"], route_class=ApiRoute)
 
 _PNG: dict[int | str, dict[str, Any]] = {
     200: {"content": {"image/png": {}}, "description": "a PNG picture"},
@@ -268,7 +269,9 @@ def project_with_calibration(
     """Image pixels -> floor (x, y) metres through this calibration's camera (active or not)."""
     cal = _owned(session, tenant_id, calibration_id)
     spec = get_spec(cal.spec)
-    return floor_points_response(_genome(cal), body.pixels, (spec.width_m, spec.length_m), cal.id)
+    return floor_points_response(
+        camera.PreparedCamera(_genome(cal)), body.pixels, (spec.width_m, spec.length_m), cal.id
+    )
 
 
 @router.post("/calibrations/{calibration_id}/image-points", response_model=ImagePointsResponse)

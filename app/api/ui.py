@@ -10,6 +10,7 @@ from fastapi.responses import FileResponse
 
 from app.api.deps import StateDep
 from app.api.errors import ApiError
+from app.api.routing import ApiRoute
 from app.api.security_headers import PAGE_CSP
 from app.calib.court import COURT_SPECS
 from app.media.sniff import IMAGE_TYPES, VIDEO_TYPES
@@ -23,7 +24,7 @@ STATIC_TYPES = {
     ".html": "text/html",
 }
 
-router = APIRouter(include_in_schema=False)
+router = APIRouter(include_in_schema=False, route_class=ApiRoute)
 
 
 @router.get("/")

@@ -243,7 +243,30 @@ def _distort_with_jacobian(
     return xd, yd, dxd_dx, dxd_dy, dxd_dy, dyd_dy
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
+def _undistort_one(
+    tx: float, ty: float, dist: np.ndarray, iterations: int
+) -> tuple[float, float, bool]:
+    """Newton's inversion of the distortion for one distorted normalised point: (x, y, ok)."""
+    x, y = tx, ty
+    for _ in range(iterations):
+        fx, fy, a, b, c, e = _distort_with_jacobian(x, y, dist)
+        rx, ry = fx - tx, fy - ty
+        if abs(rx) < 1e-13 and abs(ry) < 1e-13:
+            break
+        det = a * e - b * c
+        if abs(det) < 1e-12:
+            det = 1e-12
+        x -= (e * rx - b * ry) / det
+        y -= (-c * rx + a * ry) / det
+    fx, fy, a, b, c, e = _distort_with_jacobian(x, y, dist)
+    residual = np.hypot(fx - tx, fy - ty)
+    # a root on the folded part of the lens model (det <= 0) is not a physical preimage
+    ok = np.isfinite(x) and np.isfinite(y) and residual < 1e-10 and a * e - b * c > 0.0
+    return x, y, ok
+
+
+@numba.njit(cache=True, nogil=True)
 def _undistort_njit(
     xd: np.ndarray, yd: np.ndarray, dist: np.ndarray, iterations: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -252,23 +275,7 @@ def _undistort_njit(
     ys = np.empty(n)
     ok = np.zeros(n, dtype=np.bool_)
     for i in range(n):
-        tx, ty = xd[i], yd[i]
-        x, y = tx, ty
-        for _ in range(iterations):
-            fx, fy, a, b, c, e = _distort_with_jacobian(x, y, dist)
-            rx, ry = fx - tx, fy - ty
-            if abs(rx) < 1e-13 and abs(ry) < 1e-13:
-                break
-            det = a * e - b * c
-            if abs(det) < 1e-12:
-                det = 1e-12
-            x -= (e * rx - b * ry) / det
-            y -= (-c * rx + a * ry) / det
-        fx, fy, a, b, c, e = _distort_with_jacobian(x, y, dist)
-        residual = np.hypot(fx - tx, fy - ty)
-        xs[i], ys[i] = x, y
-        # a root on the folded part of the lens model (det <= 0) is not a physical preimage
-        ok[i] = np.isfinite(x) and np.isfinite(y) and residual < 1e-10 and a * e - b * c > 0.0
+        xs[i], ys[i], ok[i] = _undistort_one(xd[i], yd[i], dist, iterations)
     return xs, ys, ok
 
 
@@ -323,6 +330,81 @@ def undistort_normalized(
     return x.reshape(shape), y.reshape(shape), ok.reshape(shape)
 
 
+UNDISTORT_ITERATIONS = 30
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _pixels_to_plane_njit(
+    pixels: np.ndarray,
+    g: np.ndarray,
+    r: np.ndarray,
+    centre: np.ndarray,
+    plane_z_m: float,
+    iterations: int,
+    out: np.ndarray,
+    status: np.ndarray,
+) -> None:
+    """Pixels (M, 2) -> plane points (M, 2) and status (M,), in one pass without the GIL."""
+    for i in range(pixels.shape[0]):
+        xd = (pixels[i, 0] - g[2]) / g[0]
+        yd = (pixels[i, 1] - g[3]) / g[1]
+        x, y, ok = _undistort_one(xd, yd, g[10:15], iterations)
+        out[i, 0] = np.nan
+        out[i, 1] = np.nan
+        if not ok:
+            status[i] = RAY_UNDISTORT_FAILED
+            continue
+        # the ray's direction in the court frame: R^T (x, y, 1)
+        dx = r[0, 0] * x + r[1, 0] * y + r[2, 0]
+        dy = r[0, 1] * x + r[1, 1] * y + r[2, 1]
+        dz = r[0, 2] * x + r[1, 2] * y + r[2, 2]
+        s = (plane_z_m - centre[2]) / dz
+        if not (np.isfinite(s) and s > 0.0):
+            status[i] = RAY_MISSES_FLOOR
+            continue
+        status[i] = RAY_OK
+        out[i, 0] = centre[0] + s * dx
+        out[i, 1] = centre[1] + s * dy
+
+
+class PreparedCamera:
+    """One camera with what every mapping needs computed once: the API keeps these per
+    calibration (calibrations never change), so a request pays for its points only.
+
+    Arrays are read-only; the object is immutable by convention (share it between threads).
+    """
+
+    __slots__ = ("centre", "genome", "r", "t")
+
+    def __init__(self, genome: np.ndarray) -> None:
+        g = np.array(as_population(genome)[0], dtype=np.float64)  # a private copy
+        r, t = court_extrinsics(g)
+        r, t = np.ascontiguousarray(r[0]), np.ascontiguousarray(t[0])
+        centre = np.ascontiguousarray(-r.T @ t)
+        for a in (g, r, t, centre):
+            a.setflags(write=False)
+        self.genome, self.r, self.t, self.centre = g, r, t, centre
+
+    def pixel_to_floor(
+        self, pixels: np.ndarray, plane_z_m: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """`pixel_to_floor` through this camera."""
+        px = np.ascontiguousarray(np.asarray(pixels, dtype=np.float64).reshape(-1, 2))
+        out = np.empty((px.shape[0], 2))
+        status = np.empty(px.shape[0], dtype=np.int8)
+        _pixels_to_plane_njit(
+            px,
+            self.genome,
+            self.r,
+            self.centre,
+            float(plane_z_m),
+            UNDISTORT_ITERATIONS,
+            out,
+            status,
+        )
+        return out, status
+
+
 def pixel_to_floor(
     genome: np.ndarray, pixels: np.ndarray, plane_z_m: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -330,26 +412,9 @@ def pixel_to_floor(
 
     Undistorts, casts the ray from the camera centre and intersects it with the plane. Status is
     RAY_OK, RAY_UNDISTORT_FAILED or RAY_MISSES_FLOOR; points are NaN where status != RAY_OK.
+    Many calls through one camera: `PreparedCamera(genome).pixel_to_floor`.
     """
-    g = as_population(genome)[0]
-    px = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
-    xd = (px[:, 0] - g[2]) / g[0]
-    yd = (px[:, 1] - g[3]) / g[1]
-    with np.errstate(all="ignore"):
-        x, y, ok = undistort_normalized(xd, yd, g[DISTORTION_GENES])
-        r, t = court_extrinsics(g)
-        r, t = r[0], t[0]
-        centre = -r.T @ t
-        rays = np.stack([x, y, np.ones_like(x)], axis=1) @ r  # rows: R^T d
-        s = (plane_z_m - centre[2]) / rays[:, 2]
-        hits = centre[None, :] + s[:, None] * rays
-    status = np.full(px.shape[0], RAY_OK, dtype=np.int8)
-    status[~ok] = RAY_UNDISTORT_FAILED
-    misses = ok & ~(np.isfinite(s) & (s > 0))
-    status[misses] = RAY_MISSES_FLOOR
-    out = hits[:, :2].copy()
-    out[status != RAY_OK] = np.nan
-    return out, status
+    return PreparedCamera(genome).pixel_to_floor(pixels, plane_z_m)
 
 
 def floor_to_pixel(

@@ -8,11 +8,12 @@
 
 from __future__ import annotations
 
-from app.media.frames import load_frames
+from app.media.frames import FrameSpool, job_paths, load_frames, spool_images
 from app.media.probe import MediaError, MediaSummary, StoredFile
 from app.media.store import MediaStore, calibration_dir, fsync_tree, job_dir, media_store
 
 __all__ = [
+    "FrameSpool",
     "MediaError",
     "MediaStore",
     "MediaSummary",
@@ -20,6 +21,8 @@ __all__ = [
     "calibration_dir",
     "fsync_tree",
     "job_dir",
+    "job_paths",
     "load_frames",
     "media_store",
+    "spool_images",
 ]

@@ -110,3 +110,69 @@ def test_duration_limit_applies_when_sampling(tmp_path: Path) -> None:
     path = _numbered_clip(tmp_path, 200)  # 8 s at 25 fps
     frames = worker_media.sample_video_frames(path, 3, max_duration_s=2.0, max_size=(100, 100))
     assert max(float(f.mean()) for f in frames) < 55  # nothing after 2 s (frame 50)
+
+
+@pytest.mark.parametrize("n_frames, band_rows", [(9, 16), (8, 7), (2, 270), (3, 1000)])
+def test_the_banded_background_is_identical_to_the_whole_frame_one(
+    clip, n_frames: int, band_rows: int
+) -> None:
+    frames, _ = clip
+    stack = np.stack(frames[:n_frames])
+    want_bg, want_mask = background.background_from_frames(list(stack))
+    assert want_mask.any()  # the players leave something to mask
+    reads: list[tuple[int, int]] = []
+
+    def read_rows(top: int, bottom: int) -> np.ndarray:
+        reads.append((top, bottom))
+        return stack[:, top:bottom].copy()
+
+    height, width = stack.shape[1:3]
+    bg, mask = background.background_from_bands(n_frames, height, width, read_rows, band_rows)
+    np.testing.assert_array_equal(bg, want_bg)
+    np.testing.assert_array_equal(mask, want_mask)
+    # it did read in bands (with their halo), never the whole frames at once, when bands are small
+    if band_rows < height // 2:
+        assert max(b - t for t, b in reads) < height
+
+
+def test_one_frame_through_the_bands_is_its_own_background() -> None:
+    frame = np.random.default_rng(0).integers(0, 255, (20, 30, 3), dtype=np.uint8)
+    bg, mask = background.background_from_bands(
+        1, 20, 30, lambda top, bottom: frame[None, top:bottom]
+    )
+    np.testing.assert_array_equal(bg, frame)
+    assert not mask.any()
+
+
+def test_frame_spool_reads_back_any_rows(tmp_path: Path) -> None:
+    rng = np.random.default_rng(5)
+    frames = rng.integers(0, 255, (4, 50, 64, 3), dtype=np.uint8)
+    with worker_media.FrameSpool(64, 50) as spool:
+        for frame in frames:
+            spool.append(frame)
+        assert spool.n_frames == 4
+        for top, bottom in [(0, 50), (0, 1), (49, 50), (13, 37)]:
+            np.testing.assert_array_equal(spool.read_rows(top, bottom), frames[:, top:bottom])
+        with pytest.raises(ValueError):
+            spool.append(frames[0][:, :32])
+        with pytest.raises(ValueError):
+            spool.read_rows(10, 51)
+
+
+def test_spooled_images_give_the_same_background_as_decoded_ones(clip, tmp_path: Path) -> None:
+    from app.settings import Settings
+
+    frames, _ = clip
+    paths = []
+    for i, frame in enumerate(frames[:5]):
+        path = tmp_path / f"{i}.png"
+        cv2.imwrite(str(path), frame)
+        paths.append(path)
+    settings = Settings(data_dir=tmp_path / "data")
+    want = background.background_from_frames(worker_media.load_images(paths, settings))
+    with worker_media.spool_images(paths, settings) as spool:
+        got = background.background_from_bands(
+            spool.n_frames, spool.height, spool.width, spool.read_rows
+        )
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])

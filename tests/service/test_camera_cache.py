@@ -99,7 +99,11 @@ def test_cache_reads_no_database_and_refresh_picks_up_new_calibration(tmp_path: 
     assert entry.calibration_id == cal_id
     assert entry.genome is not None
     np.testing.assert_array_equal(entry.genome, genome)
+    assert entry.camera is not None
+    np.testing.assert_array_equal(entry.camera.genome, genome)
     assert cache.refresh_once() == 0  # nothing changed since
+    # the prepared camera is built once per calibration, not per refresh or request
+    assert cache.get(tenant_id, court_id).camera is entry.camera
     engine.dispose()
 
 
@@ -183,3 +187,54 @@ def test_project_answers_null_where_the_ray_misses(tmp_path: Path) -> None:
         response = client.post("/project", json=many, headers=auth)
         assert response.status_code == 200
         assert len(response.json()["points"]) == 100_000
+
+
+def test_project_body_edge_cases(tmp_path: Path) -> None:
+    """/project reads its body in one pass (app.api.json_body): the edges still answer as before."""
+    settings = make_settings(tmp_path / "data")
+    upgrade_head(settings)
+    key, tenant_id, court_id = setup_court(settings)
+    auth = {"Authorization": f"Bearer {key}"}
+    genome = synthetic.typical_target_camera(SIZE)
+    app = create_app(settings)
+    with api_client(app) as client:
+        calibrate_directly(app.state.squashcal.engine, tenant_id, court_id, genome)
+        empty = client.post("/project", json={"court_id": court_id, "pixels": []}, headers=auth)
+        assert empty.status_code == 200, empty.text
+        assert empty.json()["points"] == [] and empty.json()["inside_court"] == []
+        body = b'{"court_id": "%s", "pixels": [[640, 400]]}' % court_id.encode()
+        as_text = client.post(
+            "/project", content=body, headers={**auth, "content-type": "text/plain"}
+        )
+        assert as_text.status_code == 422
+        assert as_text.json()["error"]["code"] == "invalid_request"
+        for content_type in ("application/json", "application/json; charset=utf-8"):
+            ok = client.post(
+                "/project", content=body, headers={**auth, "content-type": content_type}
+            )
+            assert ok.status_code == 200, ok.text
+        # ints are floats; one field missing or extra is a 422 naming it
+        missing = client.post("/project", json={"court_id": court_id}, headers=auth)
+        assert missing.status_code == 422 and "pixels" in missing.json()["error"]["message"]
+        extra = {"court_id": court_id, "pixels": [], "colour": "red"}
+        response = client.post("/project", json=extra, headers=auth)
+        assert response.status_code == 422 and "colour" in response.json()["error"]["message"]
+        # unknown query parameters are refused on the hot path too (app.api.routing.ApiRoute)
+        query = client.post(
+            "/project?fast=1", json={"court_id": court_id, "pixels": []}, headers=auth
+        )
+        assert query.status_code == 422
+        assert query.json()["error"]["code"] == "unknown_query_parameter"
+
+
+def test_every_api_router_uses_the_checked_route_class() -> None:
+    """The unknown-query check lives in the route class (not a dependency): a router made
+    without it would silently accept misspelt parameters."""
+    from app.api import ROUTER_MODULES
+    from app.api.routing import ApiRoute
+
+    routes = [route for module in ROUTER_MODULES for route in module.router.routes]
+    assert len(routes) > 20
+    assert all(isinstance(route, ApiRoute) for route in routes), [
+        route for route in routes if not isinstance(route, ApiRoute)
+    ]
