@@ -616,6 +616,18 @@ def _unit_square_homography(
     return _square_to_quad(quad)
 
 
+@numba.njit(cache=True, inline="always")
+def _rectangle_homography(
+    hu: np.ndarray, a0: float, da: float, b0: float, db: float, out: np.ndarray
+) -> None:
+    """The homography of a model rectangle (a0 .. a0 + da, b0 .. b0 + db) into `out`, from that of
+    the unit square `hu`: H = hu A with A: (a, b) -> ((a - a0) / da, (b - b0) / db)."""
+    for row in range(3):
+        out[row, 0] = hu[row, 0] / da
+        out[row, 1] = hu[row, 1] / db
+        out[row, 2] = hu[row, 2] - a0 * out[row, 0] - b0 * out[row, 1]
+
+
 @numba.njit(cache=True)
 def _hypotheses_njit(
     across_lines: np.ndarray,
@@ -720,11 +732,7 @@ def _hypotheses_njit(
                                         continue
                                     dx = along_values[s] - along_values[r]
                                     xr = along_values[r]
-                                    # H_model = H_unit A, A: (x, y) -> ((x - xr)/dx, (y - yp)/dy)
-                                    for row in range(3):
-                                        hm[row, 0] = hu[row, 0] / dx
-                                        hm[row, 1] = hu[row, 1] / dy
-                                        hm[row, 2] = hu[row, 2] - xr * hm[row, 0] - yp * hm[row, 1]
+                                    _rectangle_homography(hu, xr, dx, yp, dy, hm)
                                     f = -1.0
                                     if square_centred:
                                         f = _focal_of_floor_homography(hm, focal_min, focal_max)
@@ -1058,10 +1066,7 @@ def _wall_hypotheses_njit(
                             for r in range(2):
                                 xr = x_values[r]
                                 dx = x_values[1 - r] - xr
-                                for row in range(3):
-                                    hm[row, 0] = hu[row, 0] / dx
-                                    hm[row, 1] = hu[row, 1] / dz
-                                    hm[row, 2] = hu[row, 2] - xr * hm[row, 0] - zp * hm[row, 1]
+                                _rectangle_homography(hu, xr, dx, zp, dz, hm)
                                 solved = _focal_of_floor_homography(hm, focal_min, focal_max)
                                 for g in range(-1, focal_grid.shape[0]):
                                     f = solved if g < 0 else focal_grid[g]
