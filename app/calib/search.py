@@ -402,15 +402,20 @@ def _in_play_volume(x: float, y: float, z: float, width_m: float, length_m: floa
 def in_play_volume(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
     """(N,) bool: the camera centre is where players play (no fixed camera stands there)."""
     pop = camera.as_population(genomes)
+    finite = np.all(np.isfinite(pop), axis=1)
+    r, t = camera.court_extrinsics(pop[finite])
     out = np.zeros(len(pop), dtype=bool)
-    r = np.empty((3, 3))
-    t = np.empty(3)
-    for i, g in enumerate(pop):
-        if not np.all(np.isfinite(g)):
-            continue
-        extrinsics_njit(g, r, t)
-        c = -r.T @ t
-        out[i] = _in_play_volume(c[0], c[1], c[2], model.spec.width_m, model.spec.length_m)
+    out[finite] = _in_play_volume_all(
+        -np.einsum("nji,nj->ni", r, t), model.spec.width_m, model.spec.length_m
+    )
+    return out
+
+
+@numba.njit(cache=True)
+def _in_play_volume_all(centres: np.ndarray, width_m: float, length_m: float) -> np.ndarray:
+    out = np.empty(centres.shape[0], dtype=np.bool_)
+    for i in range(centres.shape[0]):
+        out[i] = _in_play_volume(centres[i, 0], centres[i, 1], centres[i, 2], width_m, length_m)
     return out
 
 
