@@ -277,6 +277,21 @@ def _intersect(l1: np.ndarray, l2: np.ndarray) -> tuple[float, float, bool]:
 
 
 @numba.njit(cache=True, inline="always")
+def _axes_consistent(h: np.ndarray, f: float, max_cos: float, max_length_ratio: float) -> bool:
+    """Whether a plane homography (pixels relative to the principal point) under focal length f
+    has orthogonal axes (|cos| <= max_cos) of equal length (to max_length_ratio)."""
+    r1x, r1y, r1z = h[0, 0] / f, h[1, 0] / f, h[2, 0]
+    r2x, r2y, r2z = h[0, 1] / f, h[1, 1] / f, h[2, 1]
+    n1 = np.sqrt(r1x * r1x + r1y * r1y + r1z * r1z)
+    n2 = np.sqrt(r2x * r2x + r2y * r2y + r2z * r2z)
+    if n1 == 0.0 or n2 == 0.0:
+        return False
+    if abs((r1x * r2x + r1y * r2y + r1z * r2z) / (n1 * n2)) > max_cos:
+        return False
+    return abs(n1 / n2 - 1.0) <= max_length_ratio
+
+
+@numba.njit(cache=True, inline="always")
 def _focal_of_floor_homography(h: np.ndarray, focal_min: float, focal_max: float) -> float:
     """Focal length (px) of a floor homography `h` (court floor (x, y, 1) -> image pixels relative
     to the principal point) under square pixels, or -1 if it is not that of a rotation.
@@ -302,16 +317,12 @@ def _focal_of_floor_homography(h: np.ndarray, focal_min: float, focal_max: float
     f = 1.0 / np.sqrt(u)
     if f < focal_min or f > focal_max:
         return -1.0
+    if not _axes_consistent(h, f, MAX_AXES_COS, MAX_AXES_LENGTH_RATIO):
+        return -1.0
     r1x, r1y, r1z = b1x / f, b1y / f, c1
     r2x, r2y, r2z = b2x / f, b2y / f, c2
     n1 = np.sqrt(r1x * r1x + r1y * r1y + r1z * r1z)
     n2 = np.sqrt(r2x * r2x + r2y * r2y + r2z * r2z)
-    if n1 == 0.0 or n2 == 0.0:
-        return -1.0
-    if abs((r1x * r2x + r1y * r2y + r1z * r2z) / (n1 * n2)) > MAX_AXES_COS:
-        return -1.0
-    if abs(n1 / n2 - 1.0) > MAX_AXES_LENGTH_RATIO:
-        return -1.0
     # how the camera is held (either sign of the homography's scale): r1, r2 are the court's x
     # and y axes in camera coordinates, so the court's down axis is their cross product
     ux, uy, uz = r1x / n1, r1y / n1, r1z / n1
@@ -1100,21 +1111,6 @@ def _wall_hypotheses_njit(
                                         out_f[n_out] = f
                                         n_out += 1
     return n_out
-
-
-@numba.njit(cache=True, inline="always")
-def _axes_consistent(h: np.ndarray, f: float, max_cos: float, max_length_ratio: float) -> bool:
-    """Whether a plane homography (pixels relative to the principal point) under focal length f
-    has orthogonal axes (|cos| <= max_cos) of equal length (to max_length_ratio)."""
-    r1x, r1y, r1z = h[0, 0] / f, h[1, 0] / f, h[2, 0]
-    r2x, r2y, r2z = h[0, 1] / f, h[1, 1] / f, h[2, 1]
-    n1 = np.sqrt(r1x * r1x + r1y * r1y + r1z * r1z)
-    n2 = np.sqrt(r2x * r2x + r2y * r2y + r2z * r2z)
-    if n1 == 0.0 or n2 == 0.0:
-        return False
-    if abs((r1x * r2x + r1y * r2y + r1z * r2z) / (n1 * n2)) > max_cos:
-        return False
-    return abs(n1 / n2 - 1.0) <= max_length_ratio
 
 
 def front_wall_hypotheses(
