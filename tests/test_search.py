@@ -101,6 +101,25 @@ def test_front_wall_hypotheses_contain_the_camera_that_made_the_lines(with_corne
     assert np.all(r[:, 1, 2] > 0)  # level: the court's down is down in the picture
 
 
+def test_front_wall_seen_at_an_angle_gives_the_focal_length():
+    from app.calib.cases import look_at_rotation, make_genome
+
+    # high on the left side wall, looking across at the front wall: the wall is seen at an angle,
+    # so its homography pins the focal length; 0.77 of the width lies between the grid's steps
+    centre = np.array([0.3, 6.5, -3.2])
+    rotation = look_at_rotation(centre, np.array([4.0, 0.0, -1.5]), 0.0)
+    f = 0.77 * SIZE[0]
+    truth = make_genome(centre, rotation, f, f, ((SIZE[0] - 1) / 2, (SIZE[1] - 1) / 2), np.zeros(5))
+    corners = ["front_left_corner_mid", "front_right_corner_mid"]
+    image_lines = _image_lines(truth, FRONT_WALL_LINES + corners)
+    groups = search.vanishing_groups(image_lines)
+    hypotheses = search.front_wall_hypotheses(image_lines, groups, court.court_model(), SIZE, None)
+    errors = _floor_error_px(truth, hypotheses, walls_too=True)
+    best = hypotheses[np.argmin(errors)]
+    assert errors.min() < 0.5
+    assert abs(best[0] / f - 1.0) < 0.01
+
+
 def test_no_camera_stands_where_players_play():
     model = court.court_model()
 

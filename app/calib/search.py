@@ -292,15 +292,18 @@ def _axes_consistent(h: np.ndarray, f: float, max_cos: float, max_length_ratio: 
 
 
 @numba.njit(cache=True, inline="always")
-def _focal_of_floor_homography(h: np.ndarray, focal_min: float, focal_max: float) -> float:
-    """Focal length (px) of a floor homography `h` (court floor (x, y, 1) -> image pixels relative
-    to the principal point) under square pixels, or -1 if it is not that of a rotation.
+def _focal_of_plane_homography(h: np.ndarray, focal_min: float, focal_max: float) -> float:
+    """Focal length (px) of the homography `h` of a model plane (plane (a, b, 1) -> image pixels
+    relative to the principal point, a and b orthogonal metric axes) under square pixels, or -1
+    if it is not that of a rotation. How the camera is held is left to the caller: which axis is
+    down differs between the floor and a wall.
 
     With K = diag(f, f, 1), K^-1 h = s [r1 r2 t]. Two conditions on r1, r2 are linear in
     u = 1 / f^2: the floor axes are orthogonal (cos = e1 / (n1 n2)) and equally long
     ((n1^2 - n2^2) / (n1^2 + n2^2) = e2 / N); with n1 ~ n2, n1 n2 ~ N / 2, so weights 2 and 1
     make them comparable. Either may be degenerate on its own (the first when the court's
-    across lines are parallel in the image), not both for a camera looking down at the floor.
+    across lines are parallel in the image), not both for a camera that sees the plane at an
+    angle.
     """
     b1x, b1y, c1 = h[0, 0], h[1, 0], h[2, 0]
     b2x, b2y, c2 = h[0, 1], h[1, 1], h[2, 1]
@@ -319,8 +322,19 @@ def _focal_of_floor_homography(h: np.ndarray, focal_min: float, focal_max: float
         return -1.0
     if not _axes_consistent(h, f, MAX_AXES_COS, MAX_AXES_LENGTH_RATIO):
         return -1.0
-    r1x, r1y, r1z = b1x / f, b1y / f, c1
-    r2x, r2y, r2z = b2x / f, b2y / f, c2
+    return f
+
+
+@numba.njit(cache=True, inline="always")
+def _focal_of_floor_homography(h: np.ndarray, focal_min: float, focal_max: float) -> float:
+    """Focal length (px) of a floor homography `h` (court floor (x, y, 1) -> image pixels relative
+    to the principal point) under square pixels, or -1 if it is not that of a rotation or of a
+    camera held as people film."""
+    f = _focal_of_plane_homography(h, focal_min, focal_max)
+    if f <= 0.0:
+        return -1.0
+    r1x, r1y, r1z = h[0, 0] / f, h[1, 0] / f, h[2, 0]
+    r2x, r2y, r2z = h[0, 1] / f, h[1, 1] / f, h[2, 1]
     n1 = np.sqrt(r1x * r1x + r1y * r1y + r1z * r1z)
     n2 = np.sqrt(r2x * r2x + r2y * r2y + r2z * r2z)
     # how the camera is held (either sign of the homography's scale): r1, r2 are the court's x
@@ -1083,7 +1097,7 @@ def _wall_hypotheses_njit(
                                 xr = x_values[r]
                                 dx = x_values[1 - r] - xr
                                 _rectangle_homography(hu, xr, dx, zp, dz, hm)
-                                solved = _focal_of_floor_homography(hm, focal_min, focal_max)
+                                solved = _focal_of_plane_homography(hm, focal_min, focal_max)
                                 for g in range(-1, focal_grid.shape[0]):
                                     f = solved if g < 0 else focal_grid[g]
                                     if f <= 0.0:
