@@ -30,6 +30,7 @@ import tempfile
 import threading
 import time
 import uuid
+from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -309,7 +310,17 @@ class SoakCounts:
     project_errors: int = 0
     uploads: int = 0
     upload_refused: int = 0
+    # "status code: error code" of each refused upload, to tell throttling from a fault
+    refusals: Counter[str] = field(default_factory=Counter)
     stop: threading.Event = field(default_factory=threading.Event)
+
+
+def _refusal_of(response: httpx.Response) -> str:
+    try:
+        code = response.json().get("error", {}).get("code", "?")
+    except ValueError:
+        code = "not JSON"
+    return f"{response.status_code}: {code}"
 
 
 def _project_traffic(url: str, auth: dict[str, str], court_id: str, counts: SoakCounts) -> None:
@@ -400,6 +411,7 @@ def soak(args: argparse.Namespace) -> None:
                                 outstanding.append(response.headers["location"])
                             else:
                                 counts.upload_refused += 1
+                                counts.refusals[_refusal_of(response)] += 1
                             i += 1
                         if not minute_snapshot and time.monotonic() - started > 60:
                             snapshot("after 1 minute")
@@ -430,7 +442,8 @@ def soak(args: argparse.Namespace) -> None:
     )
     print(
         f"jobs by status: {done}; uploads accepted {counts.uploads}, refused "
-        f"{counts.upload_refused}; /project requests {counts.project_requests}, "
+        f"{counts.upload_refused} {dict(counts.refusals)}; /project requests "
+        f"{counts.project_requests}, "
         f"non-200 {counts.project_errors}"
     )
     n = args.soak_workers
