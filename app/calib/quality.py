@@ -41,7 +41,7 @@ import numpy as np
 
 from app.calib.court import CourtModel
 from app.calib.lines import EvidenceMaps
-from app.calib.search import VerifySamples, edge_hit_probability, edge_support
+from app.calib.search import VerifySamples, edge_support
 
 # tight tolerance of the verdict (px at 1920 px wide; never below 1.5 px)
 VERDICT_TOLERANCE_PX_AT_1920 = 3.0
@@ -148,11 +148,6 @@ def quality_figures(
         "supported_edges": float(good_edge.sum()),
         "edges_in_view": float(in_view.sum()),
         "supported_share_of_edges": float(good_edge.sum() / max(in_view.sum(), 1)),
-        # supported edges over the number expected of a right camera given which edges are in
-        # view (glass junctions, white-on-white corners and back walls seldom show)
-        "supported_over_expected": float(
-            good_edge.sum() / max(float(edge_hit_probability(model)[in_view].sum()), 1.0)
-        ),
         "wall_edges_supported": float((good_edge & walls).sum()),
         "log_likelihood_ratio_per_px": float(llr[0] / total_visible) if total_visible else 0.0,
         "floor_across_supported": float((good_edge & across).sum()),
