@@ -659,6 +659,52 @@ def _rectangle_homography(
 
 
 @numba.njit(cache=True)
+def _alternative_intrinsics(
+    hu: np.ndarray,
+    ratios2: np.ndarray,
+    orthogonal_vp: np.ndarray,
+    width: float,
+    height: float,
+    focal_min: float,
+    focal_max: float,
+    alt_k: np.ndarray,
+    alt_ratio2: np.ndarray,
+) -> int:
+    """Intrinsics other than square pixels at the centre for the plane rectangle whose unit
+    square images as `hu` (pixels relative to the centre) and whose normal's vanishing point is
+    `orthogonal_vp`, under every span ratio in `ratios2`: a free principal point (a cropped
+    photo; kept when it is off the centre by ALTERNATIVE_MIN_OFFSET_SHARE of the width) and
+    non-square pixels (an anamorphic frame; kept when the aspect differs from 1 by
+    ALTERNATIVE_MIN_ASPECT_CHANGE). Written to alt_k, alt_ratio2; returns the count."""
+    k = np.empty(4)
+    n_alt = 0
+    for u in range(ratios2.shape[0]):
+        for square in (True, False):
+            if not _intrinsics_with_vertical(
+                hu[:, 0].copy(), hu[:, 1].copy(), ratios2[u], orthogonal_vp, square, width, k
+            ):
+                continue
+            if not (focal_min <= k[0] <= focal_max):
+                continue
+            if square:
+                shift = np.sqrt(k[2] * k[2] + k[3] * k[3])
+                if shift < ALTERNATIVE_MIN_OFFSET_SHARE * width:
+                    continue
+                if abs(k[2]) > 0.5 * width or abs(k[3]) > 0.5 * height:
+                    continue
+            else:
+                aspect = k[1] / k[0]
+                if abs(aspect - 1.0) < ALTERNATIVE_MIN_ASPECT_CHANGE or not (
+                    ASPECT_RANGE[0] <= aspect <= ASPECT_RANGE[1]
+                ):
+                    continue
+            alt_k[n_alt] = k
+            alt_ratio2[n_alt] = ratios2[u]
+            n_alt += 1
+    return n_alt
+
+
+@numba.njit(cache=True)
 def _hypotheses_njit(
     across_lines: np.ndarray,
     along_lines: np.ndarray,
@@ -695,7 +741,6 @@ def _hypotheses_njit(
     limit = 3.0 * max(width, height)
     quad = np.empty((4, 2))
     hm = np.empty((3, 3))
-    k = np.empty(4)
     alt_k = np.empty((2 * ratios2.shape[0], 4))
     alt_ratio2 = np.empty(2 * ratios2.shape[0])
     with_vertical = vertical[0] != 0.0 or vertical[1] != 0.0 or vertical[2] != 0.0
@@ -721,35 +766,17 @@ def _hypotheses_njit(
                     # the ratio of the assignment's x and y spans only
                     n_alt = 0
                     if with_vertical and max(i, j, kk, ll) < n_alt_lines:
-                        for u in range(ratios2.shape[0]):
-                            for square in (True, False):
-                                if not _intrinsics_with_vertical(
-                                    hu[:, 0].copy(),
-                                    hu[:, 1].copy(),
-                                    ratios2[u],
-                                    vertical,
-                                    square,
-                                    width,
-                                    k,
-                                ):
-                                    continue
-                                if not (focal_min <= k[0] <= focal_max):
-                                    continue
-                                if square:
-                                    shift = np.sqrt(k[2] * k[2] + k[3] * k[3])
-                                    if shift < ALTERNATIVE_MIN_OFFSET_SHARE * width:
-                                        continue
-                                    if abs(k[2]) > 0.5 * width or abs(k[3]) > 0.5 * height:
-                                        continue
-                                else:
-                                    aspect = k[1] / k[0]
-                                    if abs(aspect - 1.0) < ALTERNATIVE_MIN_ASPECT_CHANGE or not (
-                                        ASPECT_RANGE[0] <= aspect <= ASPECT_RANGE[1]
-                                    ):
-                                        continue
-                                alt_k[n_alt] = k
-                                alt_ratio2[n_alt] = ratios2[u]
-                                n_alt += 1
+                        n_alt = _alternative_intrinsics(
+                            hu,
+                            ratios2,
+                            vertical,
+                            width,
+                            height,
+                            focal_min,
+                            focal_max,
+                            alt_k,
+                            alt_ratio2,
+                        )
                     for p in range(across_values.shape[0]):
                         for q in range(across_values.shape[0]):
                             if p == q:
@@ -1050,17 +1077,24 @@ def _wall_hypotheses_njit(
     max_distance: float,
     court_centre: np.ndarray,
     court_size: np.ndarray,
+    along_vp: np.ndarray,
+    n_alt_lines: int,
+    ratios2: np.ndarray,
     out_r: np.ndarray,
     out_t: np.ndarray,
-    out_f: np.ndarray,
+    out_k: np.ndarray,
 ) -> int:
     """Every quadruple of two `across_lines` and two `upright_lines` under every assignment of
-    front-wall line heights and corners: the cameras (square pixels, principal point at the
-    centre) whose front wall they are, written to out_r, out_t, out_f; returns the count.
+    front-wall line heights and corners: the cameras whose front wall they are, written to
+    out_r, out_t and out_k (fx, fy, cx, cy relative to the centre); returns the count.
 
-    The focal length comes from the wall homography when it pins one (the wall seen at an
-    angle); every grid focal length the homography is consistent with is tried as well (a wall
-    seen face-on is consistent with all of them)."""
+    Square pixels at the centre: the focal length comes from the wall homography when it pins
+    one (the wall seen at an angle); every grid focal length the homography is consistent with
+    is tried as well (a wall seen face-on is consistent with all of them). With the vanishing
+    point of the lines along the court `along_vp` (homogeneous, relative to the centre; zeros
+    for none), the quadrangles of the `n_alt_lines` strongest lines also give a free principal
+    point and non-square pixels, as on the floor with the vertical (`_alternative_intrinsics`;
+    `ratios2`: every (dx / dz)^2 of an assignment)."""
     n_a = across_lines.shape[0]
     n_b = upright_lines.shape[0]
     cap = out_r.shape[0]
@@ -1070,6 +1104,9 @@ def _wall_hypotheses_njit(
     hm = np.empty((3, 3))
     m = np.empty((3, 3))
     focal_min, focal_max = focal_grid[0], focal_grid[focal_grid.shape[0] - 1]
+    with_along = along_vp[0] != 0.0 or along_vp[1] != 0.0 or along_vp[2] != 0.0
+    alt_k = np.empty((2 * ratios2.shape[0], 4))
+    alt_ratio2 = np.empty(2 * ratios2.shape[0])
     for i in range(n_a):
         for j in range(i + 1, n_a):
             for kk in range(n_b):
@@ -1087,6 +1124,19 @@ def _wall_hypotheses_njit(
                     )
                     if hu[2, 2] == 0.0:
                         continue
+                    n_alt = 0
+                    if with_along and max(i, j, kk, ll) < n_alt_lines:
+                        n_alt = _alternative_intrinsics(
+                            hu,
+                            ratios2,
+                            along_vp,
+                            width,
+                            height,
+                            focal_min,
+                            focal_max,
+                            alt_k,
+                            alt_ratio2,
+                        )
                     for p in range(z_values.shape[0]):
                         for q in range(z_values.shape[0]):
                             if p == q:
@@ -1098,19 +1148,30 @@ def _wall_hypotheses_njit(
                                 dx = x_values[1 - r] - xr
                                 _rectangle_homography(hu, xr, dx, zp, dz, hm)
                                 solved = _focal_of_plane_homography(hm, focal_min, focal_max)
-                                for g in range(-1, focal_grid.shape[0]):
-                                    f = solved if g < 0 else focal_grid[g]
-                                    if f <= 0.0:
-                                        continue
-                                    if g >= 0 and not _axes_consistent(
-                                        hm, f, WALL_MAX_AXES_COS, WALL_MAX_AXES_LENGTH_RATIO
-                                    ):
-                                        continue
+                                for g in range(-1 - n_alt, focal_grid.shape[0]):
+                                    if g < -1:
+                                        alt = -2 - g
+                                        if (
+                                            abs((dx * dx) / (dz * dz) / alt_ratio2[alt] - 1.0)
+                                            > 1e-9
+                                        ):
+                                            continue
+                                        fx, fy = alt_k[alt, 0], alt_k[alt, 1]
+                                        cx, cy = alt_k[alt, 2], alt_k[alt, 3]
+                                    else:
+                                        fx = solved if g < 0 else focal_grid[g]
+                                        fy, cx, cy = fx, 0.0, 0.0
+                                        if fx <= 0.0:
+                                            continue
+                                        if g >= 0 and not _axes_consistent(
+                                            hm, fx, WALL_MAX_AXES_COS, WALL_MAX_AXES_LENGTH_RATIO
+                                        ):
+                                            continue
                                     if n_out >= cap:
                                         return n_out
                                     for c in range(3):
-                                        m[0, c] = hm[0, c] / f
-                                        m[1, c] = hm[1, c] / f
+                                        m[0, c] = (hm[0, c] - cx * hm[2, c]) / fx
+                                        m[1, c] = (hm[1, c] - cy * hm[2, c]) / fy
                                         m[2, c] = hm[2, c]
                                     if _pose_from_front_wall(
                                         m,
@@ -1122,7 +1183,10 @@ def _wall_hypotheses_njit(
                                         out_r[n_out],
                                         out_t[n_out],
                                     ):
-                                        out_f[n_out] = f
+                                        out_k[n_out, 0] = fx
+                                        out_k[n_out, 1] = fy
+                                        out_k[n_out, 2] = cx
+                                        out_k[n_out, 3] = cy
                                         n_out += 1
     return n_out
 
@@ -1149,30 +1213,43 @@ def front_wall_hypotheses(
     court_size = np.array([model.spec.width_m, model.spec.length_m])
     out_r = np.empty((MAX_WALL_HYPOTHESES, 3, 3))
     out_t = np.empty((MAX_WALL_HYPOTHESES, 3))
-    out_f = np.empty(MAX_WALL_HYPOTHESES)
+    out_k = np.empty((MAX_WALL_HYPOTHESES, 4))
+    to_centred = np.array([[1.0, 0.0, -centre[0]], [0.0, 1.0, -centre[1]], [0.0, 0.0, 1.0]])
+    # every (dx / dz)^2 of an assignment of wall lines and corners
+    dzs = np.abs(z_values[:, None] - z_values[None, :])[~np.eye(len(z_values), dtype=bool)]
+    ratios2 = np.unique((x_values[1] - x_values[0]) ** 2 / dzs**2)
     upright_groups = [g for g in groups if could_be_upright(g.point, centre)]
     # the vertical's vanishing point: the best-supported group that can be it, else straight
     # down the picture at infinity (a level camera)
     vertical = upright_groups[0].point if upright_groups else np.array([0.0, 1.0, 0.0])
-    quads: list[tuple[np.ndarray, np.ndarray]] = []
+    quads: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     for ga in groups:
         if not could_be_across(ga.point, centre):
             continue
         across = strongest(ga.lines, strength, WALL_LINES_PER_GROUP)
         if len(across) < 2:
             continue
+        # the lines along the court (side walls' lines): the best-supported other group,
+        # whose vanishing point is the wall's normal (zeros: none)
+        along = [g.point for g in groups if g is not ga and not any(g is u for u in upright_groups)]
+        along_vp = to_centred @ along[0] if along else np.zeros(3)
+        along_vp = along_vp / max(float(np.linalg.norm(along_vp)), 1e-300)
         for gb in upright_groups:
             if gb is not ga and len(gb.lines) >= 2:
                 quads.append(
-                    (homog[across], homog[strongest(gb.lines, strength, WALL_LINES_PER_GROUP)])
+                    (
+                        homog[across],
+                        homog[strongest(gb.lines, strength, WALL_LINES_PER_GROUP)],
+                        along_vp,
+                    )
                 )
         # the wall's lines end at its corners, which may be too faint to be lines of their
         # own: corners through the ends of the lines across, towards the vertical
         ends = lines.extent[across].reshape(-1, 2)
         corners = np.cross(np.column_stack([ends, np.ones(len(ends))]), vertical)
-        quads.append((homog[across], corners))
+        quads.append((homog[across], corners, along_vp))
     parts = []
-    for a, b in quads:
+    for a, b, along_vp in quads:
         n = _wall_hypotheses_njit(
             np.ascontiguousarray(a, dtype=np.float64),
             np.ascontiguousarray(b, dtype=np.float64),
@@ -1188,11 +1265,14 @@ def front_wall_hypotheses(
             MAX_DISTANCE_FROM_COURT_M,
             court_centre,
             court_size,
+            np.ascontiguousarray(along_vp),
+            ALTERNATIVE_LINES_PER_GROUP,
+            ratios2,
             out_r,
             out_t,
-            out_f,
+            out_k,
         )
-        parts.append(genomes_from_poses(out_f[:n], out_r[:n], out_t[:n], image_size, undistortion))
+        parts.append(genomes_from_poses(out_k[:n], out_r[:n], out_t[:n], image_size, undistortion))
     if not parts:
         return np.zeros((0, camera.N_GENES))
     return np.concatenate(parts)
