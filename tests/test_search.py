@@ -120,6 +120,33 @@ def test_front_wall_seen_at_an_angle_gives_the_focal_length():
     assert abs(best[0] / f - 1.0) < 0.01
 
 
+@pytest.mark.parametrize("frame", ["cropped", "anamorphic"])
+def test_front_wall_with_the_side_walls_gives_a_cropped_or_anamorphic_camera(frame):
+    truth = _low_tripod_behind_back_wall()
+    if frame == "cropped":
+        truth[camera.GENE["c_u"]] += 0.25 * SIZE[0]  # the principal point far off the centre
+        truth[camera.GENE["c_v"]] += 0.15 * SIZE[1]
+    else:
+        truth[camera.GENE["f_v"]] = 0.75 * truth[camera.GENE["f_u"]]
+    # the front wall's lines and corners, and the side walls' floor junctions seen at a grazing
+    # angle (their vanishing point is the wall's normal)
+    names = FRONT_WALL_LINES + ["front_left_corner_mid", "front_right_corner_mid"]
+    with_sides = _image_lines(truth, names + ["left_floor_front", "right_floor_front"])
+    model = court.court_model()
+    found = search.front_wall_hypotheses(
+        with_sides, search.vanishing_groups(with_sides), model, SIZE, None
+    )
+    errors = _floor_error_px(truth, found, walls_too=True)
+    best = int(np.argmin(errors))
+    assert errors[best] < 1.0
+    for gene in ("f_u", "f_v", "c_u", "c_v"):
+        assert found[best, camera.GENE[gene]] == pytest.approx(truth[camera.GENE[gene]], abs=3.0)
+    # without the side walls the wall alone cannot tell such a camera
+    alone = _image_lines(truth, names)
+    without = search.front_wall_hypotheses(alone, search.vanishing_groups(alone), model, SIZE, None)
+    assert len(without) == 0 or _floor_error_px(truth, without, walls_too=True).min() > 2.0
+
+
 def test_no_camera_stands_where_players_play():
     model = court.court_model()
 
