@@ -188,7 +188,6 @@ def busy_workers(engine: sa.Engine, workers: RealWorkers) -> list[str]:
 
 
 @pytest.mark.slow
-@pytest.mark.e2e
 def test_real_workers_sigkilled_and_restarted_each_job_succeeds_once_with_its_own_camera(
     engine: sa.Engine, any_db_settings: Settings, tmp_path: Path
 ) -> None:
