@@ -15,6 +15,7 @@ from pathlib import Path
 
 import httpx
 import pytest
+import sqlalchemy as sa
 from fastapi import FastAPI
 
 from app.db import repo
@@ -163,3 +164,11 @@ def any_db_settings(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[
         s = make_settings(tmp_path / "data", database_url=url)
         upgrade_head(s)
         yield s
+
+
+@pytest.fixture
+def engine(any_db_settings: Settings) -> Iterator[sa.Engine]:
+    """An engine on `any_db_settings`' database (both backends)."""
+    eng = make_engine(any_db_settings)
+    yield eng
+    eng.dispose()

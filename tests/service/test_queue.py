@@ -11,15 +11,7 @@ from sqlalchemy.exc import IntegrityError
 
 from app.db import queue, repo
 from app.db.models import Calibration, Court, Job, JobStage, JobStatus, new_id, utcnow
-from app.db.session import make_engine, make_sessionmaker
-from app.settings import Settings
-
-
-@pytest.fixture
-def engine(any_db_settings: Settings):
-    eng = make_engine(any_db_settings)
-    yield eng
-    eng.dispose()
+from app.db.session import make_sessionmaker
 
 
 def add_jobs(engine, n: int, max_attempts: int = 3) -> tuple[str, list[str]]:

@@ -46,11 +46,11 @@ FAST_QUEUE = {
 
 
 class Workers:
-    """Fake-calibration worker processes on the settings' database, with their event logs."""
+    """Worker processes on the settings' database, each incarnation with its own log file:
+    here the product's own `python -m worker` (what `squashcal run` starts)."""
 
-    def __init__(self, settings: Settings, tmp_path: Path, work_s: float, **overrides: object):
+    def __init__(self, settings: Settings, tmp_path: Path, **overrides: object):
         self.settings = settings
-        self.events_dir = tmp_path / "events"
         self.log_dir = tmp_path / "logs"
         self.log_dir.mkdir(exist_ok=True)
         # named connections, so that a test can cut exactly these from PostgreSQL
@@ -62,24 +62,49 @@ class Workers:
             **os.environ,
             "SQUASHCAL_DATA_DIR": str(settings.data_dir),
             "SQUASHCAL_DATABASE_URL": url,
-            "SQUASHCAL_FAKE_WORK_S": str(work_s),
             **{f"SQUASHCAL_{k.upper()}": str(v) for k, v in {**FAST_QUEUE, **overrides}.items()},
         }
         self.processes: dict[str, subprocess.Popen[bytes]] = {}
+        self.log_paths: dict[int, Path] = {}  # by pid
         self.started = 0
+
+    def command(self, name: str) -> list[str]:
+        return [sys.executable, "-m", "worker"]
 
     def start(self, name: str) -> subprocess.Popen[bytes]:
         self.started += 1
-        with (self.log_dir / f"{name}-{self.started}.log").open("wb") as log:
+        path = self.log_dir / f"{name}-{self.started}.log"
+        with path.open("wb") as log:
             process = subprocess.Popen(
-                [sys.executable, "-m", "tests.service.fake_worker", name, str(self.events_dir)],
-                cwd=REPO_ROOT,
-                env=self.env,
-                stdout=log,
-                stderr=log,
+                self.command(name), cwd=REPO_ROOT, env=self.env, stdout=log, stderr=log
             )
         self.processes[name] = process
+        self.log_paths[process.pid] = path
         return process
+
+    def stop_all(self, timeout_s: float = 20) -> dict[str, int | None]:
+        for process in self.processes.values():
+            if process.poll() is None:
+                process.send_signal(signal.SIGTERM)
+        codes: dict[str, int | None] = {}
+        for name, process in self.processes.items():
+            try:
+                codes[name] = process.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                codes[name] = process.wait()
+        return codes
+
+
+class FakeWorkers(Workers):
+    """Fake-calibration worker processes (tests/service/fake_worker.py), with their event logs."""
+
+    def __init__(self, settings: Settings, tmp_path: Path, work_s: float, **overrides: object):
+        super().__init__(settings, tmp_path, fake_work_s=work_s, **overrides)
+        self.events_dir = tmp_path / "events"
+
+    def command(self, name: str) -> list[str]:
+        return [sys.executable, "-m", "tests.service.fake_worker", name, str(self.events_dir)]
 
     def wait_until_up(self, timeout_s: float = 40) -> None:
         """Until every worker started has imported its modules (seconds each on a busy box)."""
@@ -94,38 +119,18 @@ class Workers:
             lines += [json.loads(line) for line in path.read_text().splitlines() if line]
         return lines
 
-    def stop_all(self, timeout_s: float = 20) -> dict[str, int | None]:
-        for process in self.processes.values():
-            if process.poll() is None:
-                process.send_signal(signal.SIGTERM)
-        codes = {}
-        for name, process in self.processes.items():
-            try:
-                codes[name] = process.wait(timeout_s)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                codes[name] = process.wait()
-        return codes
-
 
 @pytest.fixture
 def workers_factory(any_db_settings: Settings, tmp_path: Path) -> Iterator:
-    made: list[Workers] = []
+    made: list[FakeWorkers] = []
 
-    def make(work_s: float, **overrides: object) -> Workers:
-        made.append(Workers(any_db_settings, tmp_path, work_s, **overrides))
+    def make(work_s: float, **overrides: object) -> FakeWorkers:
+        made.append(FakeWorkers(any_db_settings, tmp_path, work_s, **overrides))
         return made[-1]
 
     yield make
     for workers in made:
         workers.stop_all()
-
-
-@pytest.fixture
-def engine(any_db_settings: Settings) -> Iterator[sa.Engine]:
-    eng = make_engine(any_db_settings)
-    yield eng
-    eng.dispose()
 
 
 def queue_jobs(engine: sa.Engine, n_tenants: int, per_tenant: int) -> list[str]:
@@ -151,7 +156,7 @@ def wait_until_all_finished(engine: sa.Engine, n: int, timeout_s: float) -> None
 
 
 def assert_each_job_succeeded_once_with_its_own_result(
-    engine: sa.Engine, job_ids: list[str], workers: Workers, exclusive: bool = True
+    engine: sa.Engine, job_ids: list[str], workers: FakeWorkers, exclusive: bool = True
 ) -> list[Job]:
     """... and no job worked on by two live workers at once: strictly if `exclusive`; otherwise
     a worker that stalled past its lease (a loaded machine, a database outage) may still be
@@ -231,7 +236,7 @@ def test_sigkilled_workers_are_restarted_and_every_job_still_succeeds(
     assert set(workers.stop_all().values()) == {0}
 
 
-def wait_for_event(workers: Workers, kind: str, timeout_s: float) -> dict:
+def wait_for_event(workers: FakeWorkers, kind: str, timeout_s: float) -> dict:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         found = [e for e in workers.events() if e["event"] == kind]
@@ -291,7 +296,7 @@ def test_sigterm_with_grace_finishes_the_job_then_exits(engine, workers_factory)
     assert [e["event"] for e in workers.events() if e["event"] == "start"] == ["start"]
 
 
-def cut_the_database(settings: Settings, workers: Workers, seconds: float) -> None:
+def cut_the_database(settings: Settings, workers: FakeWorkers, seconds: float) -> None:
     """The workers lose the database for `seconds`: on PostgreSQL their connections are
     terminated again and again; on SQLite the database is locked (past the busy timeout)."""
     if settings.is_sqlite:
