@@ -109,7 +109,7 @@ def extrinsics_njit(g: np.ndarray, r: np.ndarray, t: np.ndarray) -> None:
         t[i] = g[4 + i] - (r[i, 0] * _PAPER_O[0] + r[i, 1] * _PAPER_O[1] + r[i, 2] * _PAPER_O[2])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _extrinsics_all(pop: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = pop.shape[0]
     r = np.empty((n, 3, 3))
@@ -184,7 +184,7 @@ def seen_pixel_njit(
     return u, v, iu, iv, not ignore[iv, iu]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _project_all(
     r: np.ndarray, t: np.ndarray, pop: np.ndarray, points: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -282,7 +282,7 @@ def _undistort_njit(
 _FOLD_SEARCH_RADII = np.linspace(0.0, 4.0, 241)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _fold_radii_njit(pop: np.ndarray, radii: np.ndarray, out: np.ndarray) -> None:
     for i in range(pop.shape[0]):
         k1, k2, k3 = pop[i, 10], pop[i, 11], pop[i, 14]

@@ -122,7 +122,7 @@ def noise_level(lab: np.ndarray) -> float:
     return 1.4826 * mad / np.sqrt(20.0)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _best_ridge(
     hxx: np.ndarray,
     hxy: np.ndarray,
@@ -218,7 +218,7 @@ def ridge_response(lab: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return best, normal, sigma_map
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _ridge_centres(
     response: np.ndarray,
     normal: np.ndarray,
@@ -306,7 +306,7 @@ def _bilinear3(img: np.ndarray, x: float, y: float, c: int) -> float:
     return top + fy * (bottom - top)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _steps(
     edges: np.ndarray,
     gx: np.ndarray,

@@ -77,7 +77,7 @@ def spacing_for_width(image_width: int) -> float:
     return 0.07 * 1920.0 / float(max(image_width, 320))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _residuals_njit(
     pop: np.ndarray,
     points: np.ndarray,

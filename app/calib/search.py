@@ -436,7 +436,7 @@ def in_play_volume(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _in_play_volume_all(centres: np.ndarray, width_m: float, length_m: float) -> np.ndarray:
     out = np.empty(centres.shape[0], dtype=np.bool_)
     for i in range(centres.shape[0]):
@@ -704,7 +704,7 @@ def _alternative_intrinsics(
     return n_alt
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _hypotheses_njit(
     across_lines: np.ndarray,
     along_lines: np.ndarray,
@@ -816,7 +816,7 @@ def _hypotheses_njit(
     return n_out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _poses_njit(
     homographies: np.ndarray,
     intrinsics: np.ndarray,
@@ -1061,7 +1061,7 @@ def could_be_upright(vp: np.ndarray, centre: np.ndarray) -> bool:
     return could_be_vertical(vp, centre)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _wall_hypotheses_njit(
     across_lines: np.ndarray,
     upright_lines: np.ndarray,
@@ -1445,7 +1445,7 @@ def _sample_evidence(
     return support, llr
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _verify_njit(
     pop: np.ndarray,
     points: np.ndarray,
@@ -1579,7 +1579,7 @@ COARSE_SPACING_M = 0.6
 FLOOR_PASS_SPACING_M = 0.8
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _coarse_njit(
     pop: np.ndarray,
     points: np.ndarray,
@@ -1889,7 +1889,7 @@ def _clip_polygon(
     return m
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _floor_share_njit(
     pop: np.ndarray,
     outline: np.ndarray,

@@ -95,7 +95,7 @@ def _find(parent: np.ndarray, i: int) -> int:
     return i
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _link(
     ys: np.ndarray,
     xs: np.ndarray,

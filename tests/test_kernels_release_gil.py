@@ -1,0 +1,30 @@
+"""The compiled kernels a calibration spends seconds in release the GIL: the worker's heartbeat
+thread must renew the job's lease while a search runs, or a live worker loses its job to
+another (at 1080p one call of the coarse ranking holds the interpreter for seconds)."""
+
+import pytest
+
+from app.calib import camera, lines, refine, search, segments
+
+LONG_KERNELS = [
+    search._hypotheses_njit,
+    search._wall_hypotheses_njit,
+    search._poses_njit,
+    search._coarse_njit,
+    search._verify_njit,
+    search._floor_share_njit,
+    search._in_play_volume_all,
+    lines._best_ridge,
+    lines._ridge_centres,
+    lines._steps,
+    refine._residuals_njit,
+    camera._extrinsics_all,
+    camera._project_all,
+    camera._fold_radii_njit,
+    segments._link,
+]
+
+
+@pytest.mark.parametrize("kernel", LONG_KERNELS, ids=lambda k: k.py_func.__name__)
+def test_long_kernel_releases_the_gil(kernel):
+    assert kernel.targetoptions.get("nogil") is True
