@@ -155,13 +155,11 @@ def wait_until_all_finished(engine: sa.Engine, n: int, timeout_s: float) -> None
         time.sleep(0.2)
 
 
-def assert_each_job_succeeded_once_with_its_own_result(
-    engine: sa.Engine, job_ids: list[str], workers: FakeWorkers, exclusive: bool = True
-) -> list[Job]:
-    """... and no job worked on by two live workers at once: strictly if `exclusive`; otherwise
-    a worker that stalled past its lease (a loaded machine, a database outage) may still be
-    computing when another claims the job, but it must then stop without storing anything (the
-    lease fencing: the one result stored is not the stalled worker's)."""
+def jobs_each_succeeded_once(
+    engine: sa.Engine, job_ids: list[str]
+) -> tuple[dict[str, Job], list[Calibration]]:
+    """The jobs (by id) and calibrations, asserting that every job succeeded with exactly one
+    calibration."""
     with make_sessionmaker(engine)() as session:
         jobs = {j.id: j for j in session.scalars(select(Job))}
         calibrations = list(session.scalars(select(Calibration)))
@@ -169,7 +167,18 @@ def assert_each_job_succeeded_once_with_its_own_result(
     assert {j.status for j in jobs.values()} == {JobStatus.SUCCEEDED}, Counter(
         (j.status, j.error_code) for j in jobs.values()
     )
-    assert sorted(c.job_id for c in calibrations if c.job_id) == sorted(job_ids)  # once each
+    assert sorted(str(c.job_id) for c in calibrations if c.job_id) == sorted(job_ids)  # once each
+    return jobs, calibrations
+
+
+def assert_each_job_succeeded_once_with_its_own_result(
+    engine: sa.Engine, job_ids: list[str], workers: FakeWorkers, exclusive: bool = True
+) -> list[Job]:
+    """... and no job worked on by two live workers at once: strictly if `exclusive`; otherwise
+    a worker that stalled past its lease (a loaded machine, a database outage) may still be
+    computing when another claims the job, but it must then stop without storing anything (the
+    lease fencing: the one result stored is not the stalled worker's)."""
+    jobs, calibrations = jobs_each_succeeded_once(engine, job_ids)
     for cal in calibrations:
         job = jobs[str(cal.job_id)]
         assert job.calibration_id == cal.id

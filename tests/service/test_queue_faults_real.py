@@ -16,7 +16,7 @@ import random
 import re
 import signal
 import time
-from collections import Counter, defaultdict
+from collections import defaultdict
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
@@ -29,14 +29,19 @@ from sqlalchemy import select
 
 from app.calib import camera, scene, search, synthetic
 from app.calib.court import floor_grid
-from app.db.models import Calibration, Job, JobStage, JobStatus
+from app.db.models import Job, JobStage, JobStatus
 from app.db.session import make_sessionmaker
 from app.main import create_app
 from app.settings import Settings
 from tests.service.conftest import api_client, new_key
 from tests.service.helpers import files
 from tests.service.test_api import make_court
-from tests.service.test_queue_faults import Workers, statuses, wait_until_all_finished
+from tests.service.test_queue_faults import (
+    Workers,
+    jobs_each_succeeded_once,
+    statuses,
+    wait_until_all_finished,
+)
 
 # Small enough to calibrate in a few seconds, large enough that every camera below calibrates to a
 # fraction of a pixel (at 160 x 90 the search misses some courts).
@@ -232,15 +237,8 @@ def test_real_workers_sigkilled_and_restarted_each_job_succeeds_once_with_its_ow
     finally:
         workers.stop_all()
 
-    with make_sessionmaker(engine)() as session:
-        jobs = {j.id: j for j in session.scalars(select(Job))}
-        calibrations = list(session.scalars(select(Calibration)))
     # every job succeeded, exactly once, with the camera that made its picture
-    assert sorted(jobs) == sorted(job_ids)
-    assert {j.status for j in jobs.values()} == {JobStatus.SUCCEEDED}, Counter(
-        (j.status, j.error_code) for j in jobs.values()
-    )
-    assert sorted(str(c.job_id) for c in calibrations) == sorted(job_ids)
+    jobs, calibrations = jobs_each_succeeded_once(engine, job_ids)
     for cal in calibrations:
         job = jobs[str(cal.job_id)]
         assert job.calibration_id == cal.id
