@@ -90,6 +90,10 @@ def wait_job_done(s: Session, stages_seen: set[str], progress_seen: list[float])
     page = s.page
     card = page.locator("#jobs li.job").first
     deadline = time.monotonic() + 240
+    # the card shows once the upload is stored and the list refreshed: on a busy 2-core machine
+    # (a worker calibrating beside the API and the browser) that has taken over Playwright's
+    # default 30 s, so it gets the job's own deadline
+    card.wait_for(state="attached", timeout=240_000)
     shot_running = False
     while time.monotonic() < deadline:
         classes = card.get_attribute("class") or ""
