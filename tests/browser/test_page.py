@@ -96,16 +96,24 @@ def wait_job_done(s: Session, stages_seen: set[str], progress_seen: list[float])
     card.wait_for(state="attached", timeout=240_000)
     shot_running = False
     while time.monotonic() < deadline:
-        classes = card.get_attribute("class") or ""
-        now = card.locator(".stages li.now")
-        if now.count():
-            stages_seen.add(now.first.inner_text())
-        if card.get_attribute("data-progress") is not None:
-            progress_seen.append(float(card.get_attribute("data-progress")))
-        if not shot_running and "Fitting the camera" in card.locator("p.line").first.inner_text():
+        # one snapshot of the card per poll: the page re-renders it as the job moves on, so
+        # separate reads (a stage counted, then read) can race with a re-render
+        state = card.evaluate(
+            """c => ({
+                classes: c.className,
+                now: c.querySelector('.stages li.now')?.innerText ?? null,
+                progress: c.dataset.progress ?? null,
+                line: c.querySelector('p.line')?.innerText ?? '',
+            })"""
+        )
+        if state["now"] is not None:
+            stages_seen.add(state["now"])
+        if state["progress"] is not None:
+            progress_seen.append(float(state["progress"]))
+        if not shot_running and "Fitting the camera" in state["line"]:
             s.shot("04-job-running")
             shot_running = True
-        if "succeeded" in classes or "failed" in classes:
+        if "succeeded" in state["classes"] or "failed" in state["classes"]:
             return
         page.wait_for_timeout(150)
     raise AssertionError("the job card never finished")
