@@ -74,7 +74,26 @@ class ApiError extends Error {
   }
 }
 
-async function api(path, options = {}) {
+// requests and image decodes in flight: the page says it is busy until they are all done, so
+// that screen readers (and the browser tests, before a reload) can tell when it has settled
+let pendingWork = 0;
+
+async function busyWith(promise) {
+  pendingWork += 1;
+  document.body.setAttribute("aria-busy", "true");
+  try {
+    return await promise;
+  } finally {
+    pendingWork -= 1;
+    if (pendingWork === 0) document.body.setAttribute("aria-busy", "false");
+  }
+}
+
+function api(path, options = {}) {
+  return busyWith(request(path, options));
+}
+
+async function request(path, options) {
   const headers = { Authorization: `Bearer ${state.key}` };
   let body = options.body;
   if (options.json !== undefined) {
@@ -114,7 +133,7 @@ function explain(error) {
 }
 
 async function bitmap(path) {
-  return createImageBitmap(await api(path));
+  return busyWith(api(path).then((blob) => createImageBitmap(blob)));
 }
 
 // ------------------------------------------------------------------------------------------

@@ -119,6 +119,23 @@ def wait_job_done(s: Session, stages_seen: set[str], progress_seen: list[float])
     raise AssertionError("the job card never finished")
 
 
+def wait_settled(s: Session) -> None:
+    """Wait until the page has no request or image decode in flight (it says aria-busy)."""
+    s.page.wait_for_function("() => document.body.getAttribute('aria-busy') === 'false'")
+
+
+def page_state(s: Session) -> dict[str, object]:
+    """What a failing wait reports: the history as shown, the page's error boxes, and the
+    browser's problems so far."""
+    shown = s.page.evaluate(
+        """() => ({
+            history: [...document.querySelectorAll('#history li')].map((li) => li.innerText),
+            errors: [...document.querySelectorAll('.error')].map((e) => e.innerText).filter(Boolean),
+        })"""
+    )
+    return {**shown, "problems": s.problems.all()}
+
+
 def canvas_pixels(s: Session) -> np.ndarray:
     data_url = s.page.evaluate("document.getElementById('viewer').toDataURL('image/png')")
     raw = base64.b64decode(data_url.split(",", 1)[1])
@@ -292,9 +309,15 @@ def test_coach_flow(browser, live, tmp_path: Path, width: int) -> None:
     s.shot("11-demo-done")
 
     # switch the active calibration back to the first one; both stay in the history
+    wait_settled(s)
     older = page.locator(f"#history li[data-id='{first_cal['id']}']")
     older.get_by_role("button", name="Make active").click()
-    page.wait_for_selector(f"#history li[data-id='{first_cal['id']}'] .badge.active")
+    try:
+        page.wait_for_selector(f"#history li[data-id='{first_cal['id']}'] .badge.active")
+    except Exception as error:  # say what the page showed, not only that it timed out
+        raise AssertionError(
+            f"the first calibration never became active: {page_state(s)}"
+        ) from error
     assert (
         httpx.get(f"{live.url}/courts/{court_id}/camera", headers=auth).json()["id"]
         == (first_cal["id"])
@@ -302,7 +325,9 @@ def test_coach_flow(browser, live, tmp_path: Path, width: int) -> None:
     assert page.locator("#history li[data-id]").count() == 2
     s.shot("12-history-switched")
 
-    # the chosen court survives a reload
+    # the chosen court survives a reload (once the page has settled: a reload cancels what is
+    # in flight, which the page's problem log would record as a failed request)
+    wait_settled(s)
     page.reload()
     page.wait_for_selector("#result:not([hidden]) #verdict strong")
     assert page.eval_on_selector("#courts", "s => s.value") == court_id
