@@ -57,6 +57,7 @@ def warm_projection() -> None:
     for g in (genome, read_only):
         camera.pixel_to_floor(g, np.array([[10.0, 20.0], [64.0, 60.0]]))
         camera.floor_to_pixel(g, np.array([[3.2, 5.0]]))
+        camera.floor_to_image_pixel(g, np.array([[3.2, 5.0]]))  # /image-points: also the fold
     render.court_polylines(genome, court_model("wsf"))
 
 
