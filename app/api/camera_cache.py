@@ -11,6 +11,10 @@ The price is at most `camera_refresh_s` (default 0.5 s) of staleness after a cal
 one small query per interval per API process, independent of request rate. If the refresher is not
 running (e.g. the app was used without its lifespan) entries older than a few intervals are
 revalidated inline, so a request never sees an old camera indefinitely.
+
+Cameras by calibration id (`/calibrations/{id}/project` and `/image-points`, any calibration of a
+court's history) are cached apart: a calibration never changes and is never deleted, so such an
+entry is never stale and needs no refresh, only a bound on how many are kept.
 """
 
 from __future__ import annotations
@@ -57,6 +61,7 @@ class CameraCache:
         self.refresh_s = refresh_s
         self.max_courts = max_courts
         self._entries: OrderedDict[str, CachedCamera] = OrderedDict()
+        self._by_calibration: OrderedDict[str, CachedCamera] = OrderedDict()
         self._lock = threading.Lock()
         self._refreshing = threading.Lock()  # held while a refresh uses the database
 
@@ -81,6 +86,45 @@ class CameraCache:
             return None
         if entry.tenant_id != tenant_id:
             raise repo.NotFound("court", court_id)
+        return entry
+
+    def peek_calibration(self, tenant_id: str, calibration_id: str) -> CachedCamera | None:
+        """The camera of one calibration if cached (no database work: safe on the event loop),
+        else None. Raises repo.NotFound for other tenants' calibrations."""
+        with self._lock:
+            entry = self._by_calibration.get(calibration_id)
+            if entry is not None:
+                self._by_calibration.move_to_end(calibration_id)
+        if entry is not None and entry.tenant_id != tenant_id:
+            raise repo.NotFound("calibration", calibration_id)
+        return entry
+
+    def calibration(self, tenant_id: str, calibration_id: str) -> CachedCamera:
+        """The camera of one calibration (of any court of the tenant, active or not); loads it on
+        a miss. Raises repo.NotFound when it does not exist or belongs to another tenant."""
+        entry = self.peek_calibration(tenant_id, calibration_id)
+        if entry is not None:
+            return entry
+        with self._sessions() as session:
+            cal = repo.get_owned(session, Calibration, tenant_id, calibration_id)
+            court_spec = get_spec(cal.spec)
+            prepared = PreparedCamera(np.asarray(cal.genome, dtype=np.float64))
+            entry = CachedCamera(
+                tenant_id=cal.tenant_id,
+                court_id=cal.court_id,
+                calibration_id=cal.id,
+                genome=prepared.genome,
+                camera=prepared,
+                image_size=(cal.image_width, cal.image_height),
+                court_width_m=court_spec.width_m,
+                court_length_m=court_spec.length_m,
+                checked_at=time.monotonic(),
+            )
+        with self._lock:
+            self._by_calibration[calibration_id] = entry
+            self._by_calibration.move_to_end(calibration_id)
+            while len(self._by_calibration) > self.max_courts:
+                self._by_calibration.popitem(last=False)
         return entry
 
     def _load(self, tenant_id: str, court_id: str) -> CachedCamera:

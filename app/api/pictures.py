@@ -13,12 +13,14 @@ from typing import Annotated, Any
 
 import cv2
 import numpy as np
+from anyio import to_thread
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 from starlette.concurrency import run_in_threadpool
 
 from app import media
-from app.api.deps import SessionDep, StateDep, TenantDep
+from app.api.camera_cache import CachedCamera
+from app.api.deps import Caller, CallerDep, SessionDep, StateDep, TenantDep
 from app.api.errors import ApiError
 from app.api.project import floor_points_response, image_points_response
 from app.api.routing import ApiRoute
@@ -262,24 +264,35 @@ def get_lines(calibration_id: str, session: SessionDep, tenant_id: TenantDep) ->
     }
 
 
+async def _calibration_camera(caller: Caller, calibration_id: str) -> CachedCamera:
+    """One calibration's camera: from memory on the event loop, or loaded in a thread on a miss."""
+    cameras = caller.state.cameras
+    entry = cameras.peek_calibration(caller.tenant_id, calibration_id)
+    if entry is None:
+        entry = await to_thread.run_sync(cameras.calibration, caller.tenant_id, calibration_id)
+    return entry
+
+
+# async, from memory, like /project (see there): a calibration's camera never changes
 @router.post("/calibrations/{calibration_id}/project", response_model=ProjectResponse)
-def project_with_calibration(
-    calibration_id: str, body: PixelsRequest, session: SessionDep, tenant_id: TenantDep
+async def project_with_calibration(
+    calibration_id: str, body: PixelsRequest, caller: CallerDep
 ) -> Response:
     """Image pixels -> floor (x, y) metres through this calibration's camera (active or not)."""
-    cal = _owned(session, tenant_id, calibration_id)
-    spec = get_spec(cal.spec)
+    entry = await _calibration_camera(caller, calibration_id)
+    assert entry.camera is not None
     return floor_points_response(
-        camera.PreparedCamera(_genome(cal)), body.pixels, (spec.width_m, spec.length_m), cal.id
+        entry.camera, body.pixels, (entry.court_width_m, entry.court_length_m), entry.calibration_id
     )
 
 
 @router.post("/calibrations/{calibration_id}/image-points", response_model=ImagePointsResponse)
-def image_points_with_calibration(
-    calibration_id: str, body: ImagePointsRequest, session: SessionDep, tenant_id: TenantDep
+async def image_points_with_calibration(
+    calibration_id: str, body: ImagePointsRequest, caller: CallerDep
 ) -> Response:
     """Floor (x, y) metres -> image pixels through this calibration's camera (active or not)."""
-    cal = _owned(session, tenant_id, calibration_id)
+    entry = await _calibration_camera(caller, calibration_id)
+    assert entry.camera is not None and entry.image_size is not None
     return image_points_response(
-        _genome(cal), body.points, (cal.image_width, cal.image_height), cal.id
+        entry.camera.genome, body.points, entry.image_size, entry.calibration_id
     )

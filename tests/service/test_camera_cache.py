@@ -164,6 +164,54 @@ def test_project_hot_path_reads_only_the_key(tmp_path: Path) -> None:
         assert key_checks == 20
 
 
+def test_a_calibrations_own_project_reads_it_once_and_keeps_it_after_a_new_one(
+    tmp_path: Path,
+) -> None:
+    """/calibrations/{id}/project and /image-points: any calibration of the history, answered
+    from memory after the first request (a calibration never changes), still the same camera
+    after another one became active, and not another tenant's."""
+    settings = make_settings(tmp_path / "data", camera_refresh_s=3600)
+    upgrade_head(settings)
+    key, tenant_id, court_id = setup_court(settings)
+    auth = {"Authorization": f"Bearer {key}"}
+    first_genome = synthetic.typical_target_camera(SIZE)
+    second_genome = first_genome.copy()
+    second_genome[camera.GENE["t_x"]] += 0.5
+    floor = np.array([[3.2, 5.44], [1.0, 8.0]])
+    pixels = camera.floor_to_pixel(first_genome, floor)
+    app = create_app(settings)
+    state = app.state.squashcal
+    with api_client(app) as client:
+        first_id = calibrate_directly(state.engine, tenant_id, court_id, first_genome)
+        calibrate_directly(state.engine, tenant_id, court_id, second_genome)
+        counter = StatementCounter(state.engine)
+        for _ in range(5):
+            got = client.post(
+                f"/calibrations/{first_id}/project", json={"pixels": pixels.tolist()}, headers=auth
+            ).json()
+            assert got["calibration_id"] == first_id
+            np.testing.assert_allclose(got["points"], floor, atol=1e-6)
+            back = client.post(
+                f"/calibrations/{first_id}/image-points",
+                json={"points": floor.tolist()},
+                headers=auth,
+            ).json()
+            np.testing.assert_allclose(back["pixels"], pixels, atol=1e-3)
+        # one load (the calibration's row) for ten requests
+        assert 1 <= counter.count <= 2, counter.statements
+        with make_sessionmaker(state.engine).begin() as session:
+            _, other_key = repo.create_api_key(session, name="other")
+        other = {"Authorization": f"Bearer {other_key}"}
+        for path, body in (
+            ("project", {"pixels": [[1.0, 2.0]]}),
+            ("image-points", {"points": [[1.0, 2.0]]}),
+        ):
+            refused = client.post(f"/calibrations/{first_id}/{path}", json=body, headers=other)
+            assert refused.status_code == 404, refused.text
+            missing = client.post(f"/calibrations/nope/{path}", json=body, headers=auth)
+            assert missing.status_code == 404, missing.text
+
+
 def test_project_answers_null_where_the_ray_misses(tmp_path: Path) -> None:
     settings = make_settings(tmp_path / "data")
     upgrade_head(settings)
