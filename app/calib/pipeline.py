@@ -10,8 +10,10 @@ Stages (each reported through `progress(stage, fraction, info)`):
    cameras go on. With a GA `bundle`, the paper's GA runs from the best of them (for comparison:
    the product does not need it).
 3. "refining": each candidate is refined on the evidence (`refine`: point-to-line, robust,
-   coarse to fine), the best is kept, the camera model is chosen by the evidence (k2, aspect
-   ratio, principal point only when they pay), the parameters' uncertainty is estimated, and the
+   coarse to fine), the best is kept and refitted from a dozen perturbed copies of itself
+   (`refine.best_of_perturbed_starts`: the tight final fit has local minima a few pixels off;
+   they may sharpen an accepted camera, never change whether one is accepted), the camera model is chosen by the evidence (k2, aspect ratio, principal point only when
+   they pay), the parameters' uncertainty is estimated, and the
    verdict (`quality`) is formed; a court of another spec that fits clearly better is reported.
 
 `CourtNotFound` is raised, with the reasons and the rejected camera, rather than returning a
@@ -493,6 +495,29 @@ def uncertainty_of(
 CONVERGENCE_POINTS = 400  # a convergence curve keeps at most this many points
 
 
+def judge_camera(
+    fit: refine.Fit,
+    samples: refine.FitSamples,
+    verify: search.VerifySamples,
+    maps: lines.EvidenceMaps,
+    model: CourtModel,
+    image_size: tuple[int, int],
+    search_info: dict[str, float],
+) -> tuple[Verdict, dict[str, Any]]:
+    """The verdict on a final fit (from `quality.quality_figures` and the fit's uncertainty),
+    and that uncertainty."""
+    width = image_size[0]
+    uncertainty = uncertainty_of(fit, samples, model, width)
+    figures = quality.quality_figures(fit.genome, verify, maps, model, width)
+    floor_t = uncertainty["floor_error_cm"]["T"]
+    figures["floor_error_t_cm"] = float("inf") if floor_t is None else float(floor_t)
+    figures["rms_px"] = fit.rms_px
+    figures["floor_share"] = float(search.floor_shares(fit.genome, model, image_size)[0])
+    figures["camera_in_play_volume"] = float(search.in_play_volume(fit.genome, model)[0])
+    figures.update({f"search_{k}": v for k, v in search_info.items()})
+    return quality.verdict(figures), uncertainty
+
+
 def ga_convergence(ga: GAResult) -> dict[str, Any]:
     """The GA's best and mean fitness per generation, thinned to CONVERGENCE_POINTS (last kept)."""
     n = len(ga.best_history)
@@ -620,17 +645,24 @@ def calibrate(
     fit = refine.refine_coarse_to_fine(
         fit.genome, samples, maps, refine_taus(width)[-1:], fit.model
     )
-    fit = refine.select_model(fit, samples, maps, width)
+    polished = refine.best_of_perturbed_starts(fit, samples, maps, refine_taus(width)[1:])
+    plain = fit
+    fit = refine.select_model(polished, samples, maps, width)
     report("refining", 0.7, {})
-    uncertainty = uncertainty_of(fit, samples, model, width)
-    figures = quality.quality_figures(fit.genome, verify, maps, model, width)
-    floor_t = uncertainty["floor_error_cm"]["T"]
-    figures["floor_error_t_cm"] = float("inf") if floor_t is None else float(floor_t)
-    figures["rms_px"] = fit.rms_px
-    figures["floor_share"] = float(search.floor_shares(fit.genome, model, size)[0])
-    figures["camera_in_play_volume"] = float(search.in_play_volume(fit.genome, model)[0])
-    figures.update({f"search_{k}": v for k, v in found.info.items()})
-    judged = quality.verdict(figures)
+    judged, uncertainty = judge_camera(fit, samples, verify, maps, model, size, found.info)
+    if polished is not plain:
+        # the perturbed starts sharpen a court the refinement found; they decide nothing about
+        # whether there is one. They too find lower costs on other sports' floors, by laying a
+        # line or two onto the floor's own lines (bench.synthetic seeds 3000+: a badminton hall
+        # refused without them passed with them), and a line a right camera was accepted on
+        # can slip off within the verdict's tight tolerance (seeds 3000+: a zoomed view refused
+        # with them). Where either camera is refused, the one without them stands.
+        plain = refine.select_model(plain, samples, maps, width)
+        plain_judged, plain_uncertainty = judge_camera(
+            plain, samples, verify, maps, model, size, found.info
+        )
+        if "not_a_court" in (judged.label, plain_judged.label):
+            fit, judged, uncertainty = plain, plain_judged, plain_uncertainty
     timings["refine"] = time.perf_counter() - t0
     report("refining", 0.9, {})
     if judged.label == "not_a_court":
