@@ -107,19 +107,8 @@ class CameraCache:
             return entry
         with self._sessions() as session:
             cal = repo.get_owned(session, Calibration, tenant_id, calibration_id)
-            court_spec = get_spec(cal.spec)
-            prepared = PreparedCamera(np.asarray(cal.genome, dtype=np.float64))
-            entry = CachedCamera(
-                tenant_id=cal.tenant_id,
-                court_id=cal.court_id,
-                calibration_id=cal.id,
-                genome=prepared.genome,
-                camera=prepared,
-                image_size=(cal.image_width, cal.image_height),
-                court_width_m=court_spec.width_m,
-                court_length_m=court_spec.length_m,
-                checked_at=time.monotonic(),
-            )
+            # the row is in the session now: _entry_for's read of it is no second query
+            entry = self._entry_for(session, cal.tenant_id, cal.court_id, cal.spec, cal.id)
         with self._lock:
             self._by_calibration[calibration_id] = entry
             self._by_calibration.move_to_end(calibration_id)

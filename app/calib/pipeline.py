@@ -12,9 +12,10 @@ Stages (each reported through `progress(stage, fraction, info)`):
 3. "refining": each candidate is refined on the evidence (`refine`: point-to-line, robust,
    coarse to fine), the best is kept and refitted from a dozen perturbed copies of itself
    (`refine.best_of_perturbed_starts`: the tight final fit has local minima a few pixels off;
-   they may sharpen an accepted camera, never change whether one is accepted), the camera model is chosen by the evidence (k2, aspect ratio, principal point only when
-   they pay), the parameters' uncertainty is estimated, and the
-   verdict (`quality`) is formed; a court of another spec that fits clearly better is reported.
+   they may sharpen an accepted camera, never change whether one is accepted), the camera
+   model is chosen by the evidence (k2, aspect ratio, principal point only when they pay), the
+   parameters' uncertainty is estimated, and the verdict (`quality`) is formed; a court of
+   another spec that fits clearly better is reported.
 
 `CourtNotFound` is raised, with the reasons and the rejected camera, rather than returning a
 camera the verdict calls not a court.
