@@ -301,7 +301,12 @@ def test_coach_flow(browser, live, tmp_path: Path, width: int) -> None:
 
     # try it without footage: a second calibration through the same flow
     page.click("#demo")
-    page.wait_for_function("() => document.querySelectorAll('#jobs li.job').length === 2")
+    # the card shows once the demo clip is rendered (the first request renders it, compiling
+    # the renderer on a fresh checkout) and uploaded: on a busy 2-core machine that has taken
+    # over Playwright's default 30 s (a fresh-clone CI run), so it gets the job's own deadline
+    page.wait_for_function(
+        "() => document.querySelectorAll('#jobs li.job').length === 2", timeout=240_000
+    )
     wait_job_done(s, set(), [])
     page.wait_for_function("() => document.querySelectorAll('#history li[data-id]').length === 2")
     second = httpx.get(f"{live.url}/courts/{court_id}/camera", headers=auth).json()
