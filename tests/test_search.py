@@ -241,7 +241,7 @@ def test_the_true_camera_outscores_moved_ones(rendered):
     supported, visible, llr = search.edge_support(cameras, samples, maps, tolerance)
     assert np.argmax(llr) == 0
     assert supported[0].sum() / visible[0].sum() > 0.7
-    coarse = search.coarse_scores(cameras, model, maps, search.rank_tolerance_px(SIZE[0]))
+    coarse = search.coarse_scores(cameras, model, maps, (search.rank_tolerance_px(SIZE[0]),))[:, 0]
     assert np.argmax(coarse) == 0
 
 

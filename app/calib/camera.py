@@ -279,7 +279,10 @@ def _undistort_njit(
     return xs, ys, ok
 
 
-_FOLD_SEARCH_RADII = np.linspace(0.0, 4.0, 241)
+# Up to 85 degrees off the axis: a nearly pinhole lens (k1 = -0.0075) folds at 81 degrees, and
+# a camera in a corner sees the wall beside it there; past its fold the polynomial puts that
+# wall back into the middle of the picture.
+_FOLD_SEARCH_RADII = np.linspace(0.0, 12.0, 721)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -296,7 +299,7 @@ def _fold_radii_njit(pop: np.ndarray, radii: np.ndarray, out: np.ndarray) -> Non
 
 def lens_fold_radii(genomes: np.ndarray) -> np.ndarray:
     """Undistorted normalised radius (N,) where each lens's radial distortion first turns back
-    (d r_d / d r <= 0), +inf where it does not within 76 degrees of the axis.
+    (d r_d / d r <= 0), +inf where it does not within 85 degrees of the axis.
 
     Past that radius the model maps two directions onto one pixel: nothing beyond it is a real
     image of the court, so fits and drawings must ignore it.

@@ -49,6 +49,9 @@ VERIFIED_HYPOTHESES = 2000
 # |lambda| (division model, radius in half-diagonals) above which a weaker lens is tried too
 STRONG_LENS_LAMBDA = 0.08
 POLISHED_FROM_LINES = 24
+# ... and ranked at the tight tolerance (see `search_cameras`)
+VERIFIED_AT_TIGHT_TOLERANCE = 500
+POLISHED_AT_TIGHT_TOLERANCE = 12
 POLISHED_FROM_GRID = 6
 POLISH_TAUS_AT_1920 = (24.0, 8.0)
 POLISH_EVALUATIONS = 120
@@ -257,33 +260,58 @@ def search_cameras(
     # a cheap ranking of everything, then the verification proper of the best
     rank_tolerance = search.rank_tolerance_px(width)
     if len(genomes) > FLOOR_PASS_HYPOTHESES:
-        first = search.coarse_scores(genomes, model, maps, rank_tolerance, floor_only=True)
+        first = search.coarse_scores(genomes, model, maps, (rank_tolerance,), floor_only=True)[:, 0]
         keep = np.argpartition(-first, FLOOR_PASS_HYPOTHESES)[:FLOOR_PASS_HYPOTHESES]
         keep = np.union1d(keep, np.flatnonzero(sources == HINT))  # the hint always goes on
         genomes, sources = genomes[keep], sources[keep]
         traced("floor pass", genomes)
-    coarse = search.coarse_scores(genomes, model, maps, rank_tolerance)
-    coarse[search.floor_shares(genomes, model, image_size) < search.MIN_FLOOR_SHARE] = -np.inf
-    coarse[search.in_play_volume(genomes, model)] = -np.inf
-    if len(genomes) > VERIFIED_HYPOTHESES:
-        keep = np.argpartition(-coarse, VERIFIED_HYPOTHESES)[:VERIFIED_HYPOTHESES]
+    # Ranked at two tolerances: the wide one keeps hypotheses a few pixels off (four lines
+    # pin a homography only near them); the tight one keeps those that are right where a busy
+    # picture puts some line within the wide tolerance of nearly every wrong camera.
+    tight_tolerance = search.verify_tolerance_px(width)
+    coarse, coarse_tight = search.coarse_scores(
+        genomes, model, maps, (rank_tolerance, tight_tolerance)
+    ).T
+    implausible = search.floor_shares(genomes, model, image_size) < search.MIN_FLOOR_SHARE
+    implausible |= search.in_play_volume(genomes, model)
+    coarse[implausible] = coarse_tight[implausible] = -np.inf
+    if len(genomes) > VERIFIED_HYPOTHESES + VERIFIED_AT_TIGHT_TOLERANCE:
+        keep = np.union1d(
+            np.argpartition(-coarse, VERIFIED_HYPOTHESES)[:VERIFIED_HYPOTHESES],
+            np.argpartition(-coarse_tight, VERIFIED_AT_TIGHT_TOLERANCE)[
+                :VERIFIED_AT_TIGHT_TOLERANCE
+            ],
+        )
         keep = np.union1d(keep, np.flatnonzero(sources == HINT))  # the hint always goes on
         genomes, sources = genomes[keep], sources[keep]
     traced("coarse", genomes)
     _, _, scores = search.edge_support(genomes, verify, maps, rank_tolerance)
-    # the line hypotheses (and the hint), and a few of the placements as a fallback
+    _, _, tight_scores = search.edge_support(genomes, verify, maps, tight_tolerance)
+    # the line hypotheses (and the hint) at both tolerances, and a few of the placements as a
+    # fallback
     from_grid = sources == 1
     chosen = list(
         search.distinct_best(
             genomes, np.where(~from_grid, scores, -np.inf), model, image_size, POLISHED_FROM_LINES
         )
     )
+    chosen += [
+        int(i)
+        for i in search.distinct_best(
+            genomes,
+            np.where(~from_grid, tight_scores, -np.inf),
+            model,
+            image_size,
+            POLISHED_AT_TIGHT_TOLERANCE,
+        )
+        if int(i) not in chosen
+    ]
     chosen += list(
         search.distinct_best(
             genomes, np.where(from_grid, scores, -np.inf), model, image_size, POLISHED_FROM_GRID
         )
     )
-    chosen = [int(i) for i in chosen if np.isfinite(scores[i])]
+    chosen = [int(i) for i in chosen if np.isfinite(scores[i]) and np.isfinite(tight_scores[i])]
     # a start camera given by the user is always polished: it is a hint worth the look
     chosen += [int(i) for i in np.flatnonzero(sources == HINT) if int(i) not in chosen]
     traced("chosen for polishing", genomes[chosen])
@@ -298,8 +326,7 @@ def search_cameras(
         ]
     ).reshape(-1, camera.N_GENES)
     traced("polished", polished)
-    tolerance = search.verify_tolerance_px(width)
-    _, _, polished_scores = search.edge_support(polished, verify, maps, tolerance)
+    _, _, polished_scores = search.edge_support(polished, verify, maps, tight_tolerance)
     polished_scores[search.in_play_volume(polished, model)] = -np.inf
     best = search.distinct_best(polished, polished_scores, model, image_size, REFINED_CANDIDATES)
     best = np.array([i for i in best if np.isfinite(polished_scores[i])], dtype=np.int64)

@@ -964,8 +964,11 @@ def floor_hypotheses(
             # the best-supported other group that can be the vertical, if any
             verticals = [
                 to_centred @ gz.point
-                for gz in groups
-                if gz is not ga and gz is not gb and could_be_vertical(gz.point, centre)
+                for gz in sorted(groups, key=lambda g: -g.support_px)
+                if gz is not ga
+                and gz is not gb
+                and could_be_vertical(gz.point, centre)
+                and beyond_horizon(gz.point, ga.point, gb.point, centre)
             ][:1]
             if not square_centred and not (
                 verticals
@@ -1308,6 +1311,20 @@ def distinct_homographies(
     return np.sort(first)
 
 
+def beyond_horizon(vp: np.ndarray, vp_a: np.ndarray, vp_b: np.ndarray, centre: np.ndarray) -> bool:
+    """Whether `vp` can be the vertical's vanishing point of a camera whose floor directions
+    vanish at `vp_a` and `vp_b` (homogeneous): the horizon is the line through them, and the
+    picture's centre lies between the horizon and the vertical's point (tilted down by t, the
+    horizon is f tan t above the principal point and the nadir f / tan t below it; tilted up,
+    the other way round), so both lie on the same side of the horizon."""
+    horizon = np.cross(vp_a, vp_b)
+    if abs(vp[2]) < 1e-12 * np.linalg.norm(vp[:2]) or not np.any(horizon[:2]):
+        return True  # no side to tell
+    side_vp = (horizon @ vp) / vp[2]
+    side_centre = horizon @ np.array([centre[0], centre[1], 1.0])
+    return bool(side_vp * side_centre > 0.0)
+
+
 def could_be_vertical(vp: np.ndarray, centre: np.ndarray) -> bool:
     """Whether a vanishing point can be the world's vertical for a camera held level: straight
     above or below the picture (within MAX_ROLL_RAD plus a margin for an off-centre principal
@@ -1368,6 +1385,7 @@ class ChanceMaps:
 
 
 CHANCE_BINS = 6
+CHANCE_SCALE = 2  # the chance maps' grid is this many times coarser than the image
 CHANCE_WINDOW_SHARE = 0.12
 CHANCE_MIN = 0.02
 CHANCE_MAX = 0.95
@@ -1375,7 +1393,7 @@ CHANCE_MAX = 0.95
 
 def chance_maps(maps: EvidenceMaps, tolerance_px: float) -> ChanceMaps:
     h, w = maps.shape
-    scale = 2
+    scale = CHANCE_SCALE
     angle = np.arctan2(maps.normals[:, 1], maps.normals[:, 0]) % np.pi
     bins = np.minimum((angle * (CHANCE_BINS / np.pi)).astype(np.int64), CHANCE_BINS - 1)
     xs = np.clip(np.rint(maps.points[:, 0]).astype(np.int64), 0, w - 1) // scale
@@ -1592,15 +1610,16 @@ def _coarse_njit(
     near_any: np.ndarray,
     normals: np.ndarray,
     ignore: np.ndarray,
-    tolerance: float,
+    tolerances: np.ndarray,
     max_sin: float,
-    chance: np.ndarray,
+    chances: np.ndarray,
     chance_scale: int,
     out: np.ndarray,
 ) -> None:
     """A cheap first ranking: the log-likelihood ratio of `_verify_njit` over a sparse sampling,
     each sample's line direction and length taken from the previous sample of its edge (one
-    projection per sample instead of two)."""
+    projection per sample instead of two), at each of `tolerances` (T,) with its chance map
+    `chances[k]`, into out (N, T)."""
     h, w = ignore.shape
     max_sample_px = 2.0 * MAX_SAMPLE_SHARE_OF_DIAGONAL * np.sqrt(h * h + w * w)
     r = np.empty((3, 3))
@@ -1608,7 +1627,7 @@ def _coarse_njit(
     for i in range(pop.shape[0]):
         g = pop[i]
         extrinsics_njit(g, r, t)
-        total = 0.0
+        out[i, :] = 0.0
         pu = 0.0
         pv = 0.0
         previous_ok = False
@@ -1623,40 +1642,41 @@ def _coarse_njit(
                 iv = int(v + 0.5)
                 if step > 0.0 and not ignore[iv, iu]:
                     length = min(step, max_sample_px)
-                    _, sample_llr = _sample_evidence(
-                        iu,
-                        iv,
-                        du,
-                        dv,
-                        step,
-                        painted[j],
-                        p_hits[j],
-                        dist_ridge,
-                        near_ridge,
-                        dist_any,
-                        near_any,
-                        normals,
-                        tolerance,
-                        max_sin,
-                        chance,
-                        chance_scale,
-                    )
-                    total += (length / tolerance) * sample_llr
+                    for k in range(tolerances.shape[0]):
+                        _, sample_llr = _sample_evidence(
+                            iu,
+                            iv,
+                            du,
+                            dv,
+                            step,
+                            painted[j],
+                            p_hits[j],
+                            dist_ridge,
+                            near_ridge,
+                            dist_any,
+                            near_any,
+                            normals,
+                            tolerances[k],
+                            max_sin,
+                            chances[k],
+                            chance_scale,
+                        )
+                        out[i, k] += (length / tolerances[k]) * sample_llr
             previous_ok = ok
             pu = u
             pv = v
-        out[i] = total
 
 
 def coarse_scores(
     genomes: np.ndarray,
     model: CourtModel,
     maps: EvidenceMaps,
-    tolerance_px: float,
+    tolerances_px: tuple[float, ...],
     floor_only: bool = False,
 ) -> np.ndarray:
-    """`_coarse_njit` over a sparse sampling of the court (N,), or of its floor only (sparser:
-    a first cut through hundreds of thousands of hypotheses)."""
+    """`_coarse_njit` over a sparse sampling of the court, or of its floor only (sparser: a
+    first cut through hundreds of thousands of hypotheses): (N, T), one column per tolerance
+    (one projection serves them all)."""
     if floor_only:
         floor_edges = [
             name
@@ -1667,8 +1687,8 @@ def coarse_scores(
     else:
         samples = verify_samples(model, COARSE_SPACING_M)
     same = np.concatenate([[False], samples.edge[1:] == samples.edge[:-1]])
-    chance = chance_maps(maps, tolerance_px)
-    out = np.empty(len(genomes))
+    chances = np.stack([chance_maps(maps, tol).values for tol in tolerances_px])
+    out = np.empty((len(genomes), len(tolerances_px)))
     _coarse_njit(
         np.ascontiguousarray(camera.as_population(genomes)),
         samples.points,
@@ -1681,10 +1701,10 @@ def coarse_scores(
         maps.near_any,
         maps.normals,
         maps.ignore.view(np.uint8),
-        float(tolerance_px),
+        np.array(tolerances_px, dtype=np.float64),
         float(np.sin(VERIFY_MAX_ANGLE_RAD)),
-        chance.values,
-        chance.scale,
+        chances,
+        CHANCE_SCALE,
         out,
     )
     return out
