@@ -9,7 +9,8 @@ keypoints (their pixels mapped to the floor through the calibrated camera, again
 positions), the reprojection error (px) of all annotated keypoints, the floor error at the T the
 calibration itself reports (one standard deviation), the camera model chosen and the wall time.
 The `check_fit` camera's own numbers are the limit (it was fitted to these points). A refused
-calibration (CourtNotFound) shows the numbers of the camera it refused.
+calibration (CourtNotFound) shows the numbers of the camera it refused. The verdict's figures
+of every no-start run go to a CSV in bench/out (the verdict is a pure function of them).
 
 A camera is counted RIGHT when its median floor error is at most RIGHT_FLOOR_CM; the summary
 gives, over the images: right and accepted (found), wrong but accepted (the failure that
@@ -22,6 +23,7 @@ them.
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import sys
 import time
@@ -33,6 +35,7 @@ import numpy as np
 
 from app.calib import camera, pipeline
 from app.calib.court import court_model
+from bench.common import out_path
 
 
 @dataclass(frozen=True)
@@ -109,6 +112,7 @@ def run(data_dir: Path, with_hint: bool) -> None:
         raise SystemExit(f"no *.json annotations in {data_dir}")
     print(HEADER)
     tally = {"found": 0, "wrong accepted": 0, "refused (right camera)": 0, "refused": 0}
+    rows: list[dict[str, object]] = []
     for ann in annotations:
         floor_cm, reproj_px = errors(ann.check_fit, ann)
         print(
@@ -129,6 +133,9 @@ def run(data_dir: Path, with_hint: bool) -> None:
                     line += f"{_stats(floor_cm)} | {_stats(reproj_px)} | "
                 if label == "no start":
                     tally["refused (right camera)" if right else "refused"] += 1
+                    rows.append(
+                        {"image": ann.name, "accepted": 0, "right": int(right)} | exc.quality
+                    )
                 reasons = "; ".join(exc.reasons) or str(exc)
                 print(f"{line}{time.perf_counter() - t0:5.1f} s: {reasons[:160]}")
                 continue
@@ -137,6 +144,9 @@ def run(data_dir: Path, with_hint: bool) -> None:
             right = bool(np.median(floor_cm) <= RIGHT_FLOOR_CM)
             if label == "no start":
                 tally["found" if right else "wrong accepted"] += 1
+                rows.append(
+                    {"image": ann.name, "accepted": 1, "right": int(right)} | result.quality
+                )
             t_cm = result.uncertainty["floor_error_cm"]["T"]
             t_text = f"{t_cm:6.1f}" if t_cm is not None else f"{'-':>6}"
             print(
@@ -148,6 +158,13 @@ def run(data_dir: Path, with_hint: bool) -> None:
     print(f"\nno start camera, {total} images (right = median floor error <= {RIGHT_FLOOR_CM} cm):")
     for key, count in tally.items():
         print(f"  {key:<24} {count:>3}/{total}")
+    path = out_path(f"real_{time.strftime('%Y%m%d_%H%M%S')}.csv")
+    keys = list(dict.fromkeys(k for row in rows for k in row))
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=keys)
+        writer.writeheader()
+        writer.writerows(rows)
+    print(f"verdict figures per image: {path}")
 
 
 def main(argv: list[str] | None = None) -> int:
