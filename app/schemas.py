@@ -14,9 +14,11 @@ from app.db import models
 if TYPE_CHECKING:  # mypy cannot follow a computed Literal: it checks these as plain strings
     JobStatus = str
     JobStage = str
+    AttemptOutcome = str
 else:
     JobStatus = Literal[tuple(s.value for s in models.JobStatus)]
     JobStage = Literal[tuple(s.value for s in models.JobStage)]
+    AttemptOutcome = Literal[tuple(s.value for s in models.AttemptOutcome)]
 # the court specifications of app.calib.court.COURT_SPECS (a test keeps the two equal)
 CourtSpecName = Literal["wsf", "psa", "doubles"]
 # (u, v) pixels or (x, y) floor metres; JSON has no NaN/Infinity, and Python's "NaN" tokens are refused.
@@ -68,6 +70,28 @@ class JobError(BaseModel):
     message: str
 
 
+class JobAttemptOut(BaseModel):
+    """One claim of the job by a worker process, and how it ended."""
+
+    attempt: int = Field(
+        ge=1,
+        description="the job's attempt number at the claim (1 = first); a released attempt does "
+        "not count, so the claim after it has the same number",
+    )
+    worker_id: str = Field(description="the worker process that held the job")
+    claimed_at: datetime
+    ended_at: datetime | None = Field(description="null while the worker holds the job")
+    outcome: AttemptOutcome | None = Field(
+        description="null while running; succeeded: stored its calibration; failed: recorded an "
+        "error and the job failed; failed_retry: recorded an error and the job was queued again; "
+        "released: its worker gave the job back on shutdown; lease_lost: its worker stopped "
+        "renewing its lease (ended when the job was taken again, or failed as worker_lost)"
+    )
+    error_code: str | None = Field(
+        description="the error the attempt recorded (outcomes failed and failed_retry)"
+    )
+
+
 class JobOut(BaseModel):
     id: str
     court_id: str
@@ -93,6 +117,10 @@ class JobOut(BaseModel):
     started_at: datetime | None
     finished_at: datetime | None
     timings_s: dict[str, float] = Field(description="seconds per stage, as far as the job got")
+    attempt_history: list[JobAttemptOut] = Field(
+        description="every claim of the job by a worker, in order (`attempts` counts them, "
+        "less the released ones)"
+    )
 
 
 class OpenCVCamera(BaseModel):

@@ -22,4 +22,6 @@ def list_court_jobs(
     tenant_id: TenantDep,
     limit: Annotated[int, Query(ge=1, le=200)] = 20,
 ) -> JobList:
-    return JobList(jobs=[job_out(j) for j in repo.list_jobs(session, tenant_id, court_id, limit)])
+    jobs = repo.list_jobs(session, tenant_id, court_id, limit)
+    attempts = repo.attempts_of_jobs(session, [job.id for job in jobs])
+    return JobList(jobs=[job_out(job, attempts[job.id]) for job in jobs])

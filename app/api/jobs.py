@@ -16,4 +16,5 @@ router = APIRouter(prefix="/jobs", tags=["jobs"], route_class=ApiRoute)
 
 @router.get("/{job_id}", response_model=JobOut)
 def get_job(job_id: str, session: SessionDep, tenant_id: TenantDep) -> JobOut:
-    return job_out(repo.get_owned(session, Job, tenant_id, job_id))
+    job = repo.get_owned(session, Job, tenant_id, job_id)
+    return job_out(job, repo.attempts_of_jobs(session, [job.id])[job.id])

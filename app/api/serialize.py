@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from datetime import datetime
 
 import numpy as np
 
-from app.db.models import Calibration, Court, Job, JobStatus, utcnow
+from app.db.models import Calibration, Court, Job, JobAttempt, JobStatus, utcnow
 from app.schemas import (
     CalibrationOut,
     CameraPose,
     CourtOut,
+    JobAttemptOut,
     JobError,
     JobOut,
     OpenCVCamera,
@@ -29,7 +31,19 @@ def court_out(court: Court) -> CourtOut:
     )
 
 
-def job_out(job: Job, now: datetime | None = None) -> JobOut:
+def job_attempt_out(attempt: JobAttempt) -> JobAttemptOut:
+    return JobAttemptOut(
+        attempt=attempt.attempt,
+        worker_id=attempt.worker_id,
+        claimed_at=attempt.claimed_at,
+        ended_at=attempt.ended_at,
+        outcome=attempt.outcome.value if attempt.outcome is not None else None,
+        error_code=attempt.error_code,
+    )
+
+
+def job_out(job: Job, attempts: Sequence[JobAttempt], now: datetime | None = None) -> JobOut:
+    """`attempts`: the job's attempts in the order of their claims (repo.attempts_of_jobs)."""
     now = now or utcnow()
     stale = (
         job.status == JobStatus.RUNNING
@@ -59,6 +73,7 @@ def job_out(job: Job, now: datetime | None = None) -> JobOut:
         started_at=job.started_at,
         finished_at=job.finished_at,
         timings_s={k: float(v) for k, v in (job.timings or {}).items()},
+        attempt_history=[job_attempt_out(a) for a in attempts],
     )
 
 

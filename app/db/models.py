@@ -9,6 +9,7 @@ from typing import Any
 
 from sqlalchemy import (
     JSON,
+    CheckConstraint,
     DateTime,
     Enum,
     Float,
@@ -19,6 +20,7 @@ from sqlalchemy import (
     String,
     Text,
     TypeDecorator,
+    text,
 )
 from sqlalchemy.engine import Dialect
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
@@ -52,6 +54,23 @@ class JobStage(StrEnum):
     REFINING = "refining"
     STORING = "storing"
     DONE = "done"
+
+
+class AttemptOutcome(StrEnum):
+    """How one attempt at a job (one claim by a worker) ended; the values are what the database and
+    the API show. An attempt still running has no outcome."""
+
+    # it stored its calibration: the job succeeded
+    SUCCEEDED = "succeeded"
+    # it recorded an error and the job failed for good (not retryable, or no attempt left)
+    FAILED = "failed"
+    # it recorded a retryable error and the job went back to the queue for another attempt
+    FAILED_RETRY = "failed_retry"
+    # its worker gave the job back on shutdown; not counted, so the next claim has its number again
+    RELEASED = "released"
+    # its worker stopped renewing the lease (killed, stalled, cut off from the database): ended when
+    # the queue noticed, i.e. when another claim took the job or failed it as worker_lost
+    LEASE_LOST = "lease_lost"
 
 
 def _string_enum(enum: type[StrEnum], name: str) -> Enum:
@@ -173,6 +192,42 @@ class Job(Base):
     started_at: Mapped[datetime | None] = mapped_column(default=None)
     finished_at: Mapped[datetime | None] = mapped_column(default=None)
     updated_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class JobAttempt(Base):
+    """One claim of a job by a worker, from the claim to how it ended: the queue writes it in the
+    same transaction as the claim and as whatever ends the attempt, so it is the record of who held
+    which job when (the jobs row keeps only the last attempt)."""
+
+    __tablename__ = "job_attempts"
+    __table_args__ = (
+        # an attempt ends with an outcome, and only then
+        CheckConstraint("(ended_at IS NULL) = (outcome IS NULL)", name="ended_with_outcome"),
+        # a job is held by at most one worker: the queue closes the stale attempt before it opens
+        # the next one, and the database refuses a second open attempt if it ever did not
+        Index(
+            "ix_job_attempts_one_open_per_job",
+            "job_id",
+            unique=True,
+            sqlite_where=text("ended_at IS NULL"),
+            postgresql_where=text("ended_at IS NULL"),
+        ),
+    )
+
+    # an integer key in the order of the claims (the claims of one job are serialised on its row):
+    # the workers' clocks, which set claimed_at, need not agree to the millisecond
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    job_id: Mapped[str] = mapped_column(ForeignKey("jobs.id", ondelete="CASCADE"), index=True)
+    # the job's attempt counter at the claim (jobs.attempts); a released attempt gives its number back
+    attempt: Mapped[int] = mapped_column(Integer)
+    worker_id: Mapped[str] = mapped_column(String(200))
+    claimed_at: Mapped[datetime] = mapped_column()
+    ended_at: Mapped[datetime | None] = mapped_column(default=None)
+    outcome: Mapped[AttemptOutcome | None] = mapped_column(
+        _string_enum(AttemptOutcome, "outcome"), default=None
+    )
+    # the error the attempt recorded (outcomes failed and failed_retry)
+    error_code: Mapped[str | None] = mapped_column(String(64), default=None)
 
 
 class Calibration(Base):

@@ -7,6 +7,13 @@ jobs. On PostgreSQL two workers claiming at the same instant may both count the 
 so fairness is approximate there; exclusivity is not. Claims are atomic: on SQLite the transaction starts with BEGIN IMMEDIATE (one writer at a time, so
 the select-then-update inside one UPDATE statement cannot race); on PostgreSQL the candidate row is
 locked with FOR UPDATE SKIP LOCKED so concurrent workers pick different jobs without waiting.
+
+Every claim opens a row of job_attempts, and whatever ends the attempt closes it, in the same
+transaction as the change to the job: finishing, failing, giving the job back, or, for a worker
+whose lease ran out, the claim that takes the job again (or fails it as worker_lost). So the
+attempts table says who held which job when, and never disagrees with the jobs table. Each of those
+transactions changes the jobs row before the job's attempts, so on PostgreSQL they queue on the job
+row and cannot deadlock over attempts.
 """
 
 from __future__ import annotations
@@ -15,10 +22,19 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta
 from typing import Any
 
-from sqlalchemy import Engine, func, or_, select, update
+from sqlalchemy import Engine, func, insert, or_, select, update
 from sqlalchemy.orm import Session, aliased
 
-from app.db.models import Calibration, Court, Job, JobStage, JobStatus, utcnow
+from app.db.models import (
+    AttemptOutcome,
+    Calibration,
+    Court,
+    Job,
+    JobAttempt,
+    JobStage,
+    JobStatus,
+    utcnow,
+)
 from app.db.session import write_engine
 
 
@@ -85,6 +101,53 @@ def _running_jobs_of_the_same_tenant(now: datetime) -> Any:
     )
 
 
+def _open_attempt(
+    session: Session, job_id: str, attempt: int, worker_id: str, now: datetime
+) -> None:
+    session.execute(
+        insert(JobAttempt).values(
+            job_id=job_id, attempt=attempt, worker_id=worker_id, claimed_at=now
+        )
+    )
+
+
+def _close_own_attempt(
+    session: Session,
+    job_id: str,
+    worker_id: str,
+    outcome: AttemptOutcome,
+    now: datetime,
+    error_code: str | None = None,
+) -> None:
+    """End the open attempt of `worker_id` at `job_id` (the caller has just checked, in this
+    transaction, that the job is running under that worker). A job claimed before the attempts
+    table existed has no open attempt: nothing to end."""
+    session.execute(
+        update(JobAttempt)
+        .where(
+            JobAttempt.job_id == job_id,
+            JobAttempt.worker_id == worker_id,
+            JobAttempt.ended_at.is_(None),
+        )
+        .values(ended_at=now, outcome=outcome, error_code=error_code)
+        .execution_options(synchronize_session=False)
+    )
+
+
+def _close_lost_attempts(session: Session, job_ids: list[str], now: datetime) -> None:
+    """End, as lease_lost, the open attempts of jobs whose lease expired and that this transaction
+    has just reclaimed or failed. It is the moment the queue took the job from the silent worker,
+    so that is the attempt's end (the worker itself may have died any time after its last renewal)."""
+    if not job_ids:
+        return
+    session.execute(
+        update(JobAttempt)
+        .where(JobAttempt.job_id.in_(job_ids), JobAttempt.ended_at.is_(None))
+        .values(ended_at=now, outcome=AttemptOutcome.LEASE_LOST)
+        .execution_options(synchronize_session=False)
+    )
+
+
 def claim(
     engine: Engine, worker_id: str, lease_s: float, now: datetime | None = None
 ) -> ClaimedJob | None:
@@ -94,7 +157,7 @@ def claim(
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
         now = _now_under_lock(session, now)
         # A job whose worker died on its last attempt will never be retried: fail it with a reason.
-        session.execute(
+        worker_lost = session.scalars(
             update(Job)
             .where(_expired(now), Job.attempts >= Job.max_attempts)
             .values(
@@ -110,8 +173,10 @@ def claim(
                 finished_at=now,
                 updated_at=now,
             )
+            .returning(Job.id)
             .execution_options(synchronize_session=False)
-        )
+        ).all()
+        _close_lost_attempts(session, list(worker_lost), now)
         candidate = (
             select(Job.id)
             .where(or_(_due(now), _expired(now)), Job.attempts < Job.max_attempts)
@@ -142,6 +207,10 @@ def claim(
         ).first()
         if job is None:
             return None
+        # An attempt still open here is the previous holder's, whose lease ran out: every other way
+        # out of the running state closes its attempt in its own transaction.
+        _close_lost_attempts(session, [job.id], now)
+        _open_attempt(session, job.id, job.attempts, worker_id, now)
         court = session.get(Court, job.court_id)
         if court is None:  # FK cascade makes this impossible short of manual surgery
             raise RuntimeError(f"job {job.id} refers to a missing court {job.court_id}")
@@ -228,6 +297,7 @@ def finish_success(
         )
         if not result.rowcount:  # type: ignore[attr-defined]
             raise LeaseLost(f"job {job.id} is no longer running under worker {worker_id}")
+        _close_own_attempt(session, job.id, worker_id, AttemptOutcome.SUCCEEDED, now)
         # Lock the court before inserting the calibration: the insert's foreign-key check takes a
         # share lock on the court row, and two jobs of one court that both hold it and then ask
         # for FOR UPDATE deadlock on PostgreSQL.
@@ -294,6 +364,8 @@ def finish_failure(
         )
         if not result.rowcount:  # type: ignore[attr-defined]
             raise LeaseLost(f"job {job_id} is no longer running under worker {worker_id}")
+        outcome = AttemptOutcome.FAILED_RETRY if requeue else AttemptOutcome.FAILED
+        _close_own_attempt(session, job_id, worker_id, outcome, now, error_code=code)
         return status
 
 
@@ -314,4 +386,7 @@ def release(engine: Engine, job_id: str, worker_id: str, now: datetime | None = 
             )
             .execution_options(synchronize_session=False)
         )
-        return bool(result.rowcount)  # type: ignore[attr-defined]
+        if not result.rowcount:  # type: ignore[attr-defined]
+            return False
+        _close_own_attempt(session, job_id, worker_id, AttemptOutcome.RELEASED, now)
+        return True

@@ -15,7 +15,17 @@ from sqlalchemy import Connection, Engine, bindparam, func, select, update
 from sqlalchemy.exc import DBAPIError, StatementError
 from sqlalchemy.orm import Session
 
-from app.db.models import ApiKey, Calibration, Court, Job, JobStage, JobStatus, Tenant, utcnow
+from app.db.models import (
+    ApiKey,
+    Calibration,
+    Court,
+    Job,
+    JobAttempt,
+    JobStage,
+    JobStatus,
+    Tenant,
+    utcnow,
+)
 
 KEY_PREFIX = "sqc_"
 
@@ -254,6 +264,18 @@ def list_jobs(session: Session, tenant_id: str, court_id: str, limit: int) -> Se
         .order_by(Job.created_at.desc(), Job.id)
         .limit(limit)
     ).all()
+
+
+def attempts_of_jobs(session: Session, job_ids: Sequence[str]) -> dict[str, list[JobAttempt]]:
+    """Each job's attempts in the order of their claims (one query for a page of jobs); callers
+    read the jobs through get_owned or list_jobs first, so these are the tenant's."""
+    by_job: dict[str, list[JobAttempt]] = {job_id: [] for job_id in job_ids}
+    rows = session.scalars(
+        select(JobAttempt).where(JobAttempt.job_id.in_(list(job_ids))).order_by(JobAttempt.id)
+    )
+    for row in rows:
+        by_job[row.job_id].append(row)
+    return by_job
 
 
 def api_key_for_hash(session: Session, key_sha256: str) -> ApiKey | None:

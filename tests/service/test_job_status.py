@@ -1,13 +1,14 @@
-"""What GET /jobs/{id} says about a job in the queue: its enums, and whether its worker is alive."""
+"""What GET /jobs/{id} says about a job in the queue: its enums, whether its worker is alive, and
+every attempt at it."""
 
 from __future__ import annotations
 
-from datetime import timedelta
+from datetime import datetime, timedelta
 
 import httpx
 
 from app.db import queue, repo
-from app.db.models import JobStage, JobStatus, new_id, utcnow
+from app.db.models import AttemptOutcome, JobStage, JobStatus, new_id, utcnow
 from app.db.session import make_engine, make_sessionmaker
 from app.settings import Settings
 
@@ -57,6 +58,54 @@ def test_a_job_whose_worker_stopped_renewing_is_shown_stale(
         engine.dispose()
 
 
+def attempt_rows(body: dict) -> list[tuple[int, str, str | None, str | None]]:
+    return [
+        (a["attempt"], a["worker_id"], a["outcome"], a["error_code"])
+        for a in body["attempt_history"]
+    ]
+
+
+def when(text: str | None) -> datetime | None:
+    return datetime.fromisoformat(text) if text is not None else None
+
+
+def test_the_job_shows_every_attempt_and_how_it_ended(
+    client: httpx.Client, settings: Settings
+) -> None:
+    auth, job_id = queued_job(settings)
+    assert client.get(f"/jobs/{job_id}", headers=auth).json()["attempt_history"] == []
+
+    engine = make_engine(settings)
+    try:
+        # killed while it held the job; the next worker takes it when the lease has run out
+        start = utcnow() - timedelta(seconds=60)
+        assert queue.claim(engine, "killed", lease_s=10, now=start)
+        retaken = start + timedelta(seconds=11)
+        assert queue.claim(engine, "unlucky", lease_s=10, now=retaken)
+        failed = retaken + timedelta(seconds=2)
+        queue.finish_failure(
+            engine, job_id, "unlucky", "storage_error", "disk full", True, now=failed
+        )
+        assert queue.claim(engine, "current", lease_s=10)
+    finally:
+        engine.dispose()
+
+    body = client.get(f"/jobs/{job_id}", headers=auth).json()
+    assert (body["status"], body["attempts"]) == ("running", 3)
+    assert attempt_rows(body) == [
+        (1, "killed", "lease_lost", None),
+        (2, "unlucky", "failed_retry", "storage_error"),
+        (3, "current", None, None),
+    ]
+    killed, unlucky, current = body["attempt_history"]
+    assert (when(killed["claimed_at"]), when(killed["ended_at"])) == (start, retaken)
+    assert (when(unlucky["claimed_at"]), when(unlucky["ended_at"])) == (retaken, failed)
+    assert current["ended_at"] is None
+    # the court's job list shows the same
+    listed = client.get(f"/courts/{body['court_id']}/jobs", headers=auth).json()["jobs"]
+    assert [attempt_rows(job) for job in listed] == [attempt_rows(body)]
+
+
 def test_the_api_enums_are_the_database_enums(client: httpx.Client) -> None:
     schemas = client.get("/openapi.json").json()["components"]["schemas"]
     job = schemas["JobOut"]["properties"]
@@ -64,3 +113,10 @@ def test_the_api_enums_are_the_database_enums(client: httpx.Client) -> None:
     assert job["stage"]["enum"] == [s.value for s in JobStage]
     assert job["status"]["enum"] == ["queued", "running", "succeeded", "failed"]
     assert schemas["JobAccepted"]["properties"]["status"]["enum"] == job["status"]["enum"]
+    # an attempt's outcome: one of the enum's, or null while it runs
+    outcome = schemas["JobAttemptOut"]["properties"]["outcome"]
+    assert outcome["anyOf"] == [
+        {"type": "string", "enum": [o.value for o in AttemptOutcome]},
+        {"type": "null"},
+    ]
+    assert job["attempt_history"]["items"] == {"$ref": "#/components/schemas/JobAttemptOut"}

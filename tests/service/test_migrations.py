@@ -10,11 +10,13 @@ from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
 from sqlalchemy import inspect
 
+from app.db import queue
 from app.db.migrate import alembic_config, current_revision, head_revision, upgrade_head
-from app.db.models import Base
+from app.db.models import Base, JobStatus
 from app.db.session import make_engine
 from app.settings import Settings
 from tests.service.conftest import make_settings, postgres_schema
+from tests.service.test_queue import add_jobs, job_row, make_calibration
 
 
 def _assert_schema_matches_models(settings: Settings) -> None:
@@ -46,6 +48,43 @@ def test_migrations_from_empty_sqlite(tmp_path: Path) -> None:
 def test_migrations_from_empty_postgres(tmp_path: Path) -> None:
     with postgres_schema() as url:
         _assert_schema_matches_models(make_settings(tmp_path / "data", database_url=url))
+
+
+def _assert_job_attempts_migrate_up_and_down_with_jobs(settings: Settings) -> None:
+    """0004 -> 0005 on a database with a job in it, work recorded in job_attempts, back down to
+    0004 (the table goes, the job stays) and up again."""
+    config = alembic_config(settings)
+    engine = make_engine(settings)
+    try:
+        command.upgrade(config, "0004")
+        _, [job_id] = add_jobs(engine, 1)
+        command.upgrade(config, "0005")
+        job = queue.claim(engine, "w", lease_s=60)
+        assert job is not None
+        queue.finish_success(engine, job, "w", make_calibration(job), {})
+        with engine.connect() as conn:
+            rows = conn.exec_driver_sql("SELECT attempt, outcome FROM job_attempts").all()
+        assert [tuple(row) for row in rows] == [(1, "succeeded")]
+        command.downgrade(config, "0004")
+        with engine.connect() as conn:
+            assert "job_attempts" not in inspect(conn).get_table_names()
+        assert job_row(engine, job_id).status == JobStatus.SUCCEEDED
+        upgrade_head(settings)
+        with engine.connect() as conn:
+            assert conn.exec_driver_sql("SELECT count(*) FROM job_attempts").scalar() == 0
+    finally:
+        engine.dispose()
+
+
+def test_job_attempts_migrate_up_and_down_with_jobs_sqlite(tmp_path: Path) -> None:
+    _assert_job_attempts_migrate_up_and_down_with_jobs(make_settings(tmp_path / "data"))
+
+
+@pytest.mark.postgres
+def test_job_attempts_migrate_up_and_down_with_jobs_postgres(tmp_path: Path) -> None:
+    with postgres_schema() as url:
+        settings = make_settings(tmp_path / "data", database_url=url)
+        _assert_job_attempts_migrate_up_and_down_with_jobs(settings)
 
 
 def test_models_differ_from_an_unmigrated_database(tmp_path: Path) -> None:

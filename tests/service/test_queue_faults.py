@@ -1,9 +1,15 @@
 """The queue under faults, with real worker processes (tests/service/fake_worker.py: the real worker
 loop and bookkeeping, a stand-in calibration of a fraction of a second), on SQLite and PostgreSQL:
-many jobs and workers, SIGKILLed and SIGTERMed workers, a database that goes away."""
+many jobs and workers, SIGKILLed and SIGTERMed workers, a database that goes away.
+
+Who held which job when is read from the queue's own record, the job_attempts table; the fake
+worker's events add what the database cannot see (a stalled worker still computing after the queue
+gave its job to another).
+"""
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import random
@@ -13,7 +19,7 @@ import sys
 import threading
 import time
 import uuid
-from collections import Counter
+from collections import Counter, defaultdict
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -22,7 +28,7 @@ import sqlalchemy as sa
 from sqlalchemy import select
 
 from app.db import repo
-from app.db.models import Calibration, Job, JobStatus
+from app.db.models import AttemptOutcome, Calibration, Job, JobAttempt, JobStatus
 from app.db.session import SQLITE_BEGIN_OPTION, make_engine, make_sessionmaker
 from app.main import create_app
 from app.settings import Settings
@@ -171,14 +177,74 @@ def jobs_each_succeeded_once(
     return jobs, calibrations
 
 
+def attempts_by_job(engine: sa.Engine) -> dict[str, list[JobAttempt]]:
+    """Every job's attempts, in the order of their claims."""
+    by_job: dict[str, list[JobAttempt]] = defaultdict(list)
+    with make_sessionmaker(engine)() as session:
+        for attempt in session.scalars(select(JobAttempt).order_by(JobAttempt.id)):
+            by_job[attempt.job_id].append(attempt)
+    return dict(by_job)
+
+
+def describe(attempts: list[JobAttempt]) -> str:
+    """The attempts, one per line, for an assertion's message."""
+    return "\n".join(
+        f"  #{a.attempt} {a.worker_id} {a.claimed_at:%H:%M:%S.%f} -> "
+        f"{a.ended_at and f'{a.ended_at:%H:%M:%S.%f}'} {a.outcome} {a.error_code}"
+        for a in attempts
+    )
+
+
+# how an attempt that was not the job's last may have ended
+GAVE_WAY = {AttemptOutcome.LEASE_LOST, AttemptOutcome.FAILED_RETRY, AttemptOutcome.RELEASED}
+
+
+def assert_attempts_show_one_holder_at_a_time_and_one_success(
+    jobs: dict[str, Job], attempts: dict[str, list[JobAttempt]]
+) -> None:
+    """What the attempts table must say of jobs that all succeeded: no job held by two workers at
+    once (each attempt ended before the next one was claimed; one the queue took back from a silent
+    worker ended at that very claim), exactly one successful attempt per job (its last, by the
+    worker and at the time the jobs row says), and the counted attempts numbered 1..attempts."""
+    assert sorted(attempts) == sorted(jobs), "a job without attempts, or attempts of no job"
+    for job_id, job in jobs.items():
+        tries = attempts[job_id]
+        story = f"job {job_id}:\n{describe(tries)}"
+        for before, after in itertools.pairwise(tries):
+            assert before.ended_at is not None and before.ended_at <= after.claimed_at, story
+            assert before.outcome in GAVE_WAY, story
+            if before.outcome == AttemptOutcome.LEASE_LOST:
+                assert before.ended_at == after.claimed_at, story
+        last = tries[-1]
+        assert last.outcome == AttemptOutcome.SUCCEEDED, story
+        assert (last.worker_id, last.ended_at) == (job.worker_id, job.finished_at), story
+        counted = [a.attempt for a in tries if a.outcome != AttemptOutcome.RELEASED]
+        assert counted == list(range(1, job.attempts + 1)), story
+
+
+def assert_each_worker_held_one_job_at_a_time(attempts: dict[str, list[JobAttempt]]) -> None:
+    """A worker process works on one job at a time: its attempts follow one another (worker ids
+    must name one process each)."""
+    by_worker: dict[str, list[JobAttempt]] = defaultdict(list)
+    for attempt in sorted(itertools.chain(*attempts.values()), key=lambda a: a.id):
+        by_worker[attempt.worker_id].append(attempt)
+    for worker_id, tries in by_worker.items():
+        for before, after in itertools.pairwise(tries):
+            assert before.ended_at is not None and before.ended_at <= after.claimed_at, (
+                f"worker {worker_id} held two jobs at once:\n{describe([before, after])}"
+            )
+
+
 def assert_each_job_succeeded_once_with_its_own_result(
     engine: sa.Engine, job_ids: list[str], workers: FakeWorkers, exclusive: bool = True
 ) -> list[Job]:
     """... and no job worked on by two live workers at once: strictly if `exclusive`; otherwise
     a worker that stalled past its lease (a loaded machine, a database outage) may still be
     computing when another claims the job, but it must then stop without storing anything (the
-    lease fencing: the one result stored is not the stalled worker's)."""
+    lease fencing: the one result stored is not the stalled worker's). Either way the queue's record
+    of attempts shows one holder at a time and one success per job."""
     jobs, calibrations = jobs_each_succeeded_once(engine, job_ids)
+    assert_attempts_show_one_holder_at_a_time_and_one_success(jobs, attempts_by_job(engine))
     for cal in calibrations:
         job = jobs[str(cal.job_id)]
         assert job.calibration_id == cal.id
@@ -206,6 +272,10 @@ def test_200_jobs_on_4_workers_each_succeed_once(engine, workers_factory) -> Non
     wait_until_all_finished(engine, len(job_ids), timeout_s=50)
     jobs = assert_each_job_succeeded_once_with_its_own_result(engine, job_ids, workers)
     assert all(job.attempts == 1 for job in jobs)
+    # the queue's record: one attempt per job, which succeeded, and no worker on two jobs at once
+    attempts = attempts_by_job(engine)
+    assert all(len(tries) == 1 for tries in attempts.values()), attempts
+    assert_each_worker_held_one_job_at_a_time(attempts)
     # every worker took part, and all stop cleanly on SIGTERM
     assert len({job.worker_id for job in jobs}) == 4
     assert set(workers.stop_all().values()) == {0}
@@ -262,6 +332,13 @@ def job_row(engine: sa.Engine, job_id: str) -> Job:
         return job
 
 
+def assert_given_back_once(engine: sa.Engine, job_id: str, worker_id: str) -> None:
+    """The job's one attempt was the worker's, and ended as released."""
+    [attempt] = attempts_by_job(engine)[job_id]
+    assert (attempt.attempt, attempt.worker_id) == (1, worker_id)
+    assert attempt.outcome == AttemptOutcome.RELEASED and attempt.ended_at is not None
+
+
 def test_sigterm_with_no_grace_gives_the_job_back_and_exits(engine, workers_factory) -> None:
     [job_id] = queue_jobs(engine, n_tenants=1, per_tenant=1)
     workers = workers_factory(work_s=30, shutdown_grace_s=0)
@@ -273,6 +350,7 @@ def test_sigterm_with_no_grace_gives_the_job_back_and_exits(engine, workers_fact
     assert time.monotonic() - t0 < 5
     job = job_row(engine, job_id)
     assert (job.status, job.attempts, job.worker_id) == (JobStatus.QUEUED, 0, None)
+    assert_given_back_once(engine, job_id, "w")
 
 
 def test_sigterm_during_a_step_that_cannot_be_interrupted_still_exits_in_bounded_time(
@@ -290,6 +368,7 @@ def test_sigterm_during_a_step_that_cannot_be_interrupted_still_exits_in_bounded
     assert time.monotonic() - t0 < 1 + HARD_EXIT_AFTER_S + 5
     job = job_row(engine, job_id)
     assert (job.status, job.attempts, job.worker_id) == (JobStatus.QUEUED, 0, None)
+    assert_given_back_once(engine, job_id, "w")
 
 
 def test_sigterm_with_grace_finishes_the_job_then_exits(engine, workers_factory) -> None:

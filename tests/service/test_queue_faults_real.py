@@ -1,24 +1,23 @@
 """The queue under SIGKILL with the real thing, on SQLite and PostgreSQL: the product's own worker
-processes (`python -m worker`, what `squashcal run` starts) running the real calibration on small
-court pictures rendered with known cameras, uploaded through the API.
+processes (`squashcal worker`, the loop `squashcal run` starts, each given its own worker id)
+running the real calibration on small court pictures rendered with known cameras, uploaded through
+the API.
 
 test_queue_faults.py drives the queue at scale (200 jobs) with a stand-in calibration; this test
-proves the real path with a few jobs. What it can observe of the real workers is what they record:
-the jobs and calibrations tables, and each worker's log, the one record of every attempt (the
-database keeps only a job's last one): "job J claimed (attempt k/m)" opens a hold of J, the
-worker's last line about J (or its death) ends it.
+proves the real path with a few jobs. What it observes of the real workers is what they record:
+the jobs and calibrations tables, and job_attempts, the queue's record of every claim (which worker
+held which job from when to when, and how it ended). The workers' logs serve diagnosis, and tell when
+an idle worker is up (it leaves no trace in the database).
 """
 
 from __future__ import annotations
 
-import itertools
 import random
-import re
 import signal
+import subprocess
+import sys
 import time
-from collections import defaultdict
-from dataclasses import dataclass
-from datetime import datetime
+from datetime import UTC, datetime
 from pathlib import Path
 
 import cv2
@@ -29,7 +28,7 @@ from sqlalchemy import select
 
 from app.calib import camera, scene, search, synthetic
 from app.calib.court import floor_grid
-from app.db.models import Job, JobStage, JobStatus
+from app.db.models import AttemptOutcome, Job, JobAttempt, JobStage, JobStatus
 from app.db.session import make_sessionmaker
 from app.main import create_app
 from app.settings import Settings
@@ -38,6 +37,10 @@ from tests.service.helpers import files
 from tests.service.test_api import make_court
 from tests.service.test_queue_faults import (
     Workers,
+    assert_attempts_show_one_holder_at_a_time_and_one_success,
+    assert_each_worker_held_one_job_at_a_time,
+    attempts_by_job,
+    describe,
     jobs_each_succeeded_once,
     statuses,
     wait_until_all_finished,
@@ -51,11 +54,6 @@ SIZE = (320, 180)
 # the holds must be strictly exclusive; a killed worker's job is claimable again within it.
 REAL_QUEUE = {"lease_s": 8.0, "heartbeat_s": 1.0, "poll_interval_s": 0.2}
 FLOOR = floor_grid("wsf", 16, 16)
-
-LOG_LINE = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) \w+ squashcal\.worker (.*)$")
-POLLING = re.compile(r"worker (\S+) polling ")
-CLAIMED = re.compile(r"job (\w+) claimed \(attempt (\d+)/\d+\)")
-SUCCEEDED = re.compile(r"job (\w+) succeeded: calibration (\w+)")
 
 
 def known_camera(i: int) -> np.ndarray:
@@ -97,66 +95,42 @@ def upload_jobs(settings: Settings, cameras: list[np.ndarray]) -> list[str]:
     return job_ids
 
 
-@dataclass
-class Hold:
-    """One attempt at a job, from a worker's log: from its claim to the worker's next claim or its
-    death (the attempt itself ends earlier, so the hold is, if anything, too long). `end` None: it
-    may still hold the job."""
-
-    job_id: str
-    attempt: int
-    worker_id: str
-    start: datetime
-    end: datetime | None = None
-    stored: str | None = None  # the calibration it says it stored
-    killed: bool = False  # SIGKILLed while it held the job
-
-
-def read_log(path: Path, killed_at: datetime | None = None) -> tuple[str | None, list[Hold]]:
-    """(the worker's id, its holds) from one worker process's log."""
-    worker_id = None
-    holds: list[Hold] = []
-    for line in path.read_text(errors="replace").splitlines():
-        if not (m := LOG_LINE.match(line)):
-            continue  # other loggers, tracebacks
-        at, message = datetime.strptime(m[1], "%Y-%m-%d %H:%M:%S,%f"), m[2]
-        if polling := POLLING.match(message):
-            worker_id = polling[1]
-        elif claimed := CLAIMED.match(message):
-            assert worker_id is not None, line
-            if holds:
-                holds[-1].end = at
-            holds.append(Hold(claimed[1], int(claimed[2]), worker_id, at))
-        elif holds and (succeeded := SUCCEEDED.match(message)):
-            assert succeeded[1] == holds[-1].job_id, line
-            holds[-1].stored = succeeded[2]
-    if holds and killed_at is not None:
-        holds[-1].end, holds[-1].killed = killed_at, holds[-1].stored is None
-    return worker_id, holds
-
-
 class RealWorkers(Workers):
-    """`python -m worker` processes; knows when it SIGKILLed which."""
+    """`squashcal worker` processes, each incarnation with its own worker id ("w2.5": worker w2,
+    the fifth process started), so that the attempts table names the process; knows when it
+    SIGKILLed which."""
 
     def __init__(self, settings: Settings, tmp_path: Path) -> None:
         super().__init__(settings, tmp_path, **REAL_QUEUE)
-        self.killed_at: dict[int, datetime] = {}  # by pid
+        self.worker_id_of: dict[str, str] = {}  # name -> its current process's worker id
+        self.killed_at: dict[str, datetime] = {}  # by worker id
 
-    def worker_ids(self) -> dict[str, str]:
-        """Live processes' worker ids (once they are polling) -> their names."""
-        ids = {}
-        for name, process in self.processes.items():
-            if process.poll() is None:
-                worker_id, _ = read_log(self.log_paths[process.pid])
-                if worker_id is not None:
-                    ids[worker_id] = name
-        return ids
+    def start(self, name: str) -> subprocess.Popen[bytes]:
+        self.worker_id_of[name] = f"{name}.{self.started + 1}"
+        return super().start(name)
+
+    def command(self, name: str) -> list[str]:
+        return [sys.executable, "-m", "app.cli", "worker", "--worker-id", self.worker_id_of[name]]
+
+    def live_names(self) -> dict[str, str]:
+        """Live processes' worker ids -> their names."""
+        return {
+            self.worker_id_of[name]: name
+            for name, process in self.processes.items()
+            if process.poll() is None
+        }
+
+    def polling(self, name: str) -> bool:
+        """Whether the worker has started polling for jobs. An idle worker leaves no trace in the
+        database: its log's start line is the one sign."""
+        log = self.log_paths[self.processes[name].pid].read_text(errors="replace")
+        return f"worker {self.worker_id_of[name]} polling " in log
 
     def wait_until_up(self, timeout_s: float) -> None:
         """Until every live worker polls (the kernels loaded from numba's on-disk cache take
         seconds; minutes when the cache is empty)."""
         deadline = time.monotonic() + timeout_s
-        while len(self.worker_ids()) < len(self.processes):
+        while not all(self.polling(name) for name in self.processes):
             assert time.monotonic() < deadline, f"workers did not start; see {self.log_dir}"
             assert all(p.poll() is None for p in self.processes.values()), self.log_dir
             time.sleep(0.2)
@@ -165,16 +139,8 @@ class RealWorkers(Workers):
         process = self.processes[name]
         process.send_signal(signal.SIGKILL)
         process.wait(10)
-        self.killed_at[process.pid] = datetime.now()
+        self.killed_at[self.worker_id_of[name]] = datetime.now(UTC)
         self.start(name)
-
-    def holds(self) -> list[Hold]:
-        """Every attempt of every worker process started."""
-        return [
-            hold
-            for pid, path in self.log_paths.items()
-            for hold in read_log(path, self.killed_at.get(pid))[1]
-        ]
 
 
 def busy_workers(engine: sa.Engine, workers: RealWorkers) -> list[str]:
@@ -189,7 +155,30 @@ def busy_workers(engine: sa.Engine, workers: RealWorkers) -> list[str]:
                 )
             )
         )
-    return sorted(name for worker_id, name in workers.worker_ids().items() if worker_id in running)
+    return sorted(name for worker_id, name in workers.live_names().items() if worker_id in running)
+
+
+def assert_killed_attempts_were_lease_lost(
+    attempts: dict[str, list[JobAttempt]], killed_at: dict[str, datetime]
+) -> list[JobAttempt]:
+    """A SIGKILLed worker's attempts: those that ended before its death succeeded; the one it held
+    when it died is lease_lost, ended when another worker took the job, after the death. Returns
+    the killed attempts. And no live worker lost a lease (a lease outlasts any stall here)."""
+    killed: list[JobAttempt] = []
+    for tries in attempts.values():
+        for attempt in tries:
+            died = killed_at.get(attempt.worker_id)
+            story = f"{describe([attempt])}, worker killed at {died}"
+            assert attempt.ended_at is not None, story
+            if attempt.outcome == AttemptOutcome.SUCCEEDED:
+                assert died is None or attempt.ended_at < died, story
+                continue
+            assert attempt.outcome == AttemptOutcome.LEASE_LOST, story
+            assert died is not None, f"a live worker lost its lease: {story}"
+            assert attempt.claimed_at < died < attempt.ended_at, story
+            killed.append(attempt)
+    assert len({a.worker_id for a in killed}) == len(killed), "a killed worker held two jobs"
+    return killed
 
 
 @pytest.mark.slow
@@ -215,6 +204,8 @@ def test_real_workers_sigkilled_and_restarted_each_job_succeeds_once_with_its_ow
     camera_of = dict(zip(job_ids, cameras, strict=True))
 
     workers = RealWorkers(any_db_settings, tmp_path)
+    # for diagnosis only (pytest shows a failed test's output): what each worker process said
+    print(f"worker logs: {workers.log_dir}")
     try:
         names = [f"w{i}" for i in range(4)]
         for name in names:
@@ -232,7 +223,6 @@ def test_real_workers_sigkilled_and_restarted_each_job_succeeds_once_with_its_ow
                 kills += 1
         wait_until_all_finished(engine, n_jobs, timeout_s=deadline - time.monotonic())
         assert all(p.poll() is None for p in workers.processes.values()), "a worker died"
-        holds = workers.holds()
         assert set(workers.stop_all().values()) == {0}
     finally:
         workers.stop_all()
@@ -246,24 +236,18 @@ def test_real_workers_sigkilled_and_restarted_each_job_succeeds_once_with_its_ow
         error_px = floor_error_px(camera_of[job.id], np.array(cal.genome))
         assert error_px < 1.0, f"job {job.id}: its result is {error_px:.1f} px off its camera"
 
-    # No job held by two workers at once; every attempt counted in the jobs table; a job tried
-    # again only after its worker was killed; the result stored by the last attempt, which said so
-    # (unless its worker was killed just after).
-    by_job: dict[str, list[Hold]] = defaultdict(list)
-    for hold in holds:
-        by_job[hold.job_id].append(hold)
+    # From the queue's record of attempts: no job held by two workers at once, nor any worker on two
+    # jobs at once; every attempt counted in the jobs table, numbered 1..k; a job tried again only
+    # after its worker was killed; the result stored by the last attempt.
+    attempts = attempts_by_job(engine)
+    assert_attempts_show_one_holder_at_a_time_and_one_success(jobs, attempts)
+    assert_each_worker_held_one_job_at_a_time(attempts)
     for job_id, job in jobs.items():
-        attempts = sorted(by_job[job_id], key=lambda h: h.start)
-        for before, after in itertools.pairwise(attempts):
-            assert before.end is not None and before.end < after.start, (
-                f"job {job_id} held by two workers at once: {before} and {after}"
-            )
-        assert [h.attempt for h in attempts] == list(range(1, job.attempts + 1)), attempts
-        assert all(h.killed for h in attempts[:-1]), f"tried again, no kill: {attempts}"
-        last = attempts[-1]
-        assert last.worker_id == job.worker_id, attempts
-        assert last.stored == job.calibration_id or last.killed, attempts
-    # the kills interrupted jobs (one may have come as its job was stored), which were taken again
-    interrupted = [h for h in holds if h.killed and h.worker_id != jobs[h.job_id].worker_id]
-    assert len(interrupted) >= n_kills - 1, holds
-    assert all(jobs[h.job_id].attempts > h.attempt for h in interrupted)
+        numbers = [a.attempt for a in attempts[job_id]]
+        assert numbers == list(range(1, job.attempts + 1)), describe(attempts[job_id])
+    # the killed workers' attempts were lease_lost, and only theirs: the kills interrupted jobs (one
+    # may have come as its job was stored, or between two jobs), which were taken again
+    killed = assert_killed_attempts_were_lease_lost(attempts, workers.killed_at)
+    assert len(workers.killed_at) == n_kills
+    assert len(killed) >= n_kills - 1, describe(killed)
+    assert all(jobs[a.job_id].attempts > a.attempt for a in killed)
