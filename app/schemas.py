@@ -71,14 +71,15 @@ class JobError(BaseModel):
 
 
 class JobAttemptOut(BaseModel):
-    """One claim of the job by a worker process, and how it ended."""
+    """One claim of the job by a worker process, and how it ended. Which worker held it is kept
+    in the database for operators (job_attempts.worker_id: host and process) and not shown to
+    tenants."""
 
     attempt: int = Field(
         ge=1,
         description="the job's attempt number at the claim (1 = first); a released attempt does "
         "not count, so the claim after it has the same number",
     )
-    worker_id: str = Field(description="the worker process that held the job")
     claimed_at: datetime
     ended_at: datetime | None = Field(description="null while the worker holds the job")
     outcome: AttemptOutcome | None = Field(

@@ -34,7 +34,6 @@ def court_out(court: Court) -> CourtOut:
 def job_attempt_out(attempt: JobAttempt) -> JobAttemptOut:
     return JobAttemptOut(
         attempt=attempt.attempt,
-        worker_id=attempt.worker_id,
         claimed_at=attempt.claimed_at,
         ended_at=attempt.ended_at,
         outcome=attempt.outcome.value if attempt.outcome is not None else None,
