@@ -55,7 +55,7 @@ POLISHED_AT_TIGHT_TOLERANCE = 12
 POLISHED_FROM_GRID = 6
 POLISH_TAUS_AT_1920 = (24.0, 8.0)
 POLISH_EVALUATIONS = 120
-REFINED_CANDIDATES = 6
+REFINED_CANDIDATES = 8
 HINT = 2  # source index of the start camera given as a hint
 # refinement truncations (px at 1920 px wide; never below 1.5 px)
 REFINE_TAUS_AT_1920 = (16.0, 5.0, 2.0)
