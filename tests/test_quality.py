@@ -104,3 +104,15 @@ def test_doubtful_figures_ask_for_a_check():
     judged = quality.verdict({**_typical_right(), "absent_fraction": 0.45})
     assert judged.label == "check"
     assert any("not seen" in reason for reason in judged.reasons)
+
+
+def test_unseen_glass_and_back_wall_lines_do_not_refuse_a_right_camera():
+    """Filmed through a glass back wall, a right camera has many edges in view that do not show
+    (the back wall's lines, junctions behind glass): a dev club view had 34% of all its edges in
+    view supported and 54% of its painted ones. Only the painted lines are held against it."""
+    figures = {
+        **_typical_right(),
+        "supported_share_of_edges": 0.34,
+        "supported_share_of_reliable_edges": 0.54,
+    }
+    assert quality.verdict(figures).label != "not_a_court"
