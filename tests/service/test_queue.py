@@ -10,7 +10,7 @@ from sqlalchemy import select, text
 from sqlalchemy.exc import IntegrityError
 
 from app.db import queue, repo
-from app.db.models import Calibration, Court, Job, JobStage, JobStatus, new_id, utcnow
+from app.db.models import Calibration, Court, Job, JobAttempt, JobStage, JobStatus, new_id, utcnow
 from app.db.session import make_sessionmaker
 
 
@@ -75,20 +75,17 @@ def test_claims_oldest_first_and_only_once(engine) -> None:
     assert row.lease_expires_at is not None and row.lease_expires_at > utcnow()
 
 
-def test_concurrent_claims_never_share_a_job(engine) -> None:
+def test_concurrent_claims_never_share_a_job_and_each_opens_its_attempt(engine) -> None:
     _, ids = add_jobs(engine, 12)
-    claimed: list[str] = []
+    claims: list[tuple[str, str]] = []
     lock = threading.Lock()
     errors: list[BaseException] = []
 
     def worker(name: str) -> None:
         try:
-            while True:
-                job = queue.claim(engine, name, lease_s=60)
-                if job is None:
-                    return
+            while (job := queue.claim(engine, name, lease_s=60)) is not None:
                 with lock:
-                    claimed.append(job.id)
+                    claims.append((job.id, name))
         except BaseException as exc:  # surfaced below
             errors.append(exc)
 
@@ -98,7 +95,10 @@ def test_concurrent_claims_never_share_a_job(engine) -> None:
     for t in threads:
         t.join(60)
     assert errors == []
-    assert sorted(claimed) == sorted(ids)  # each exactly once
+    assert sorted(job_id for job_id, _ in claims) == sorted(ids)  # each exactly once
+    with make_sessionmaker(engine)() as session:
+        opened = [(a.job_id, a.worker_id) for a in session.scalars(select(JobAttempt))]
+    assert sorted(opened) == sorted(claims)  # one attempt per claim, under its worker
 
 
 def test_expired_lease_is_reclaimed_and_the_old_worker_is_fenced_off(engine) -> None:

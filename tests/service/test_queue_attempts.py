@@ -5,8 +5,6 @@ right outcome at the right time, in the same transaction as the change to the jo
 from __future__ import annotations
 
 import itertools
-import threading
-from collections import Counter
 from datetime import datetime, timedelta
 
 import pytest
@@ -169,32 +167,6 @@ def test_a_job_retried_after_a_lost_lease_and_a_failure_keeps_every_attempt(engi
     assert job_row(engine, job_id).attempts == 3
     for before, after in itertools.pairwise(attempts):
         assert before.ended_at is not None and before.ended_at <= after.claimed_at
-
-
-def test_concurrent_claims_open_one_attempt_per_claim(engine) -> None:
-    _, ids = add_jobs(engine, 12)
-    claims: list[tuple[str, str]] = []
-    errors: list[BaseException] = []
-    lock = threading.Lock()
-
-    def worker(name: str) -> None:
-        try:
-            while (job := queue.claim(engine, name, lease_s=60)) is not None:
-                with lock:
-                    claims.append((job.id, name))
-        except BaseException as exc:  # surfaced below
-            errors.append(exc)
-
-    threads = [threading.Thread(target=worker, args=(f"w{i}",)) for i in range(4)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(60)
-    assert errors == []
-    with make_sessionmaker(engine)() as session:
-        opened = [(a.job_id, a.worker_id) for a in session.scalars(select(JobAttempt))]
-    assert sorted(opened) == sorted(claims)
-    assert Counter(job_id for job_id, _ in opened) == Counter(ids)  # one each
 
 
 def test_a_job_without_attempt_rows_still_finishes(engine) -> None:
