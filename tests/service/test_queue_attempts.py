@@ -12,20 +12,16 @@ import sqlalchemy as sa
 from sqlalchemy import select, text
 from sqlalchemy.exc import IntegrityError
 
-from app.db import queue
+from app.db import queue, repo
 from app.db.models import AttemptOutcome, Calibration, JobAttempt, JobStatus, utcnow
 from app.db.session import make_sessionmaker
 from tests.service.test_queue import add_jobs, job_row, make_calibration
 
 
 def attempts_of(engine: sa.Engine, job_id: str) -> list[JobAttempt]:
-    """The job's attempts in the order of their claims."""
+    """The job's attempts in the order of their claims, as the API reads them."""
     with make_sessionmaker(engine)() as session:
-        return list(
-            session.scalars(
-                select(JobAttempt).where(JobAttempt.job_id == job_id).order_by(JobAttempt.id)
-            )
-        )
+        return repo.attempts_of_jobs(session, [job_id])[job_id]
 
 
 def summary(attempt: JobAttempt) -> tuple[int, str, str | None, str | None]:
