@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from app.calib import cases, lines, pipeline, refine
+from app.calib import cases, lines, pipeline, refine, search
 from app.calib.court import court_model
 from bench.synthetic import FOUND_FLOOR_CM, FOUND_LINES_PX, camera_errors
 
@@ -49,3 +49,54 @@ def test_the_perturbed_starts_do_not_make_a_court_of_a_badminton_hall() -> None:
     with pytest.raises(pipeline.CourtNotFound) as info:
         pipeline.calibrate(negative.image)
     assert any("no line on the walls" in reason for reason in info.value.reasons)
+
+
+def test_a_camera_hypothesised_with_other_intrinsics_says_so() -> None:
+    size = (1280, 720)
+    centred = np.zeros(15)
+    centred[[0, 1, 2, 3]] = (1000.0, 1000.0, 639.5, 359.5)
+    assert refine.intrinsic_extensions(centred, size) == ()
+    anamorphic = centred.copy()
+    anamorphic[refine.GENE["f_v"]] = 750.0
+    assert refine.intrinsic_extensions(anamorphic, size) == ("aspect",)
+    cropped = centred.copy()
+    cropped[refine.GENE["c_u"]] = 300.0
+    assert refine.intrinsic_extensions(cropped, size) == ("centre",)
+
+
+def test_model_selection_keeps_moving_the_terms_a_fit_already_has() -> None:
+    """select_model adds terms to the fit's own: a principal point the fit moved (as one
+    hypothesised for a cropped photo is) stays free in every model tried after it, instead of
+    being frozen where the earlier fit left it."""
+    case = cases.make_case("wide_angle", 1002)
+    width = case.image.shape[1]
+    maps = lines.evidence_maps(pipeline.line_evidence_of(case.image))
+    samples = refine.fit_samples(court_model(case.spec), refine.spacing_for_width(width))
+    start = case.genome.copy()
+    start[refine.GENE["c_u"]] += 8.0
+    fit = refine.refine_coarse_to_fine(
+        start, samples, maps, pipeline.refine_taus(width)[1:], refine.model_with(("centre",))
+    )
+    selected = refine.select_model(fit, samples, maps, width)
+    assert selected.model.extensions[0] == "centre"
+    assert selected.model.name.startswith("pinhole+k1+centre")
+    assert selected.cost <= fit.cost
+
+
+def test_a_candidate_with_non_square_pixels_is_refitted_and_named_with_its_aspect() -> None:
+    """An anamorphic frame's candidate (f_v / f_u = 0.75) a little off: its aspect is refitted
+    (not kept at the hypothesis's value) and the camera model the user is told names it."""
+    case = cases.make_case("anamorphic_cropped", 1007)
+    size = (case.image.shape[1], case.image.shape[0])
+    model = court_model(case.spec)
+    maps = lines.evidence_maps(pipeline.line_evidence_of(case.image))
+    samples = refine.fit_samples(model, refine.spacing_for_width(size[0]))
+    start = case.genome.copy()
+    start[refine.GENE["f_v"]] *= 1.02
+    _, fit, _ = pipeline.refine_candidates(
+        start[None, :], samples, maps, search.verify_samples(model), model, size
+    )
+    assert "aspect" in fit.model.extensions
+    true_aspect = case.genome[refine.GENE["f_v"]] / case.genome[refine.GENE["f_u"]]
+    aspect = fit.genome[refine.GENE["f_v"]] / fit.genome[refine.GENE["f_u"]]
+    assert abs(aspect - true_aspect) < 0.005, (aspect, true_aspect)

@@ -356,10 +356,6 @@ def search_cameras(
     )
 
 
-# The camera model candidates are compared with (see `refine_candidates`).
-RANKING_MODEL = refine.model_with(("k2",))
-
-
 def refine_taus(image_width: int) -> tuple[float, ...]:
     return tuple(max(1.5, tau * image_width / 1920.0) for tau in REFINE_TAUS_AT_1920)
 
@@ -410,9 +406,10 @@ def refine_candidates(
     model: CourtModel,
     image_size: tuple[int, int],
 ) -> tuple[int, refine.Fit, np.ndarray]:
-    """Refine each candidate (pinhole + k1, coarse to fine) and pick the one with the highest
-    score. A candidate is scored at its best with a second radial term as well
-    (`RANKING_MODEL`): a wide-angle lens that one term cannot follow at the picture's edge would
+    """Refine each candidate (pinhole + k1, coarse to fine; with the non-square pixels or the
+    off-centre principal point it was hypothesised with, refitted and paid for with BIC's
+    penalty per parameter) and pick the one with the highest score. A candidate is scored at its best with a second radial term as well
+    (k2): a wide-angle lens that one term cannot follow at the picture's edge would
     otherwise lose its lines there to the tight tolerance, and the right camera to a wrong one
     that puts fewer lines at the edge. The second term is kept when it raises the score (a
     log-likelihood ratio) by more than BIC's penalty for it; the final fit may add more terms on
@@ -421,16 +418,26 @@ def refine_candidates(
     the verdict judge several cameras per picture, and on other sports' courts one of them then
     passes. Returns the winner's index, its fit and every refined candidate's score."""
     taus = refine_taus(image_size[0])
-    fits = [refine.refine_coarse_to_fine(g, samples, maps, taus) for g in candidates]
+    extensions = [refine.intrinsic_extensions(g, image_size) for g in candidates]
+    fits = [
+        refine.refine_coarse_to_fine(g, samples, maps, taus, refine.model_with(ext))
+        for g, ext in zip(candidates, extensions, strict=True)
+    ]
     scores = score_cameras(np.array([f.genome for f in fits]), verify, maps, model, image_size)
     richer = [
-        refine.refine_coarse_to_fine(g, samples, maps, taus, RANKING_MODEL) for g in candidates
+        refine.refine_coarse_to_fine(g, samples, maps, taus, refine.model_with((*ext, "k2")))
+        for g, ext in zip(candidates, extensions, strict=True)
     ]
     richer_scores = score_cameras(
         np.array([f.genome for f in richer]), verify, maps, model, image_size
     )
-    # the second term must earn its parameter: more than BIC's penalty for one more
+    # every parameter beyond square pixels at the centre and one radial term must earn its
+    # place: more than BIC's penalty for each
     penalty = float(np.log(len(samples.points)))
+    extra = penalty * np.array(
+        [refine.model_with(ext).n_params - refine.BASE.n_params for ext in extensions]
+    )
+    scores, richer_scores = scores - extra, richer_scores - extra
     use_richer = richer_scores > scores + penalty
     scores = np.where(use_richer, richer_scores, scores)
     best = int(np.argmax(scores))

@@ -165,6 +165,7 @@ class CameraModel:
 
     name: str
     columns: tuple[tuple[tuple[str, ...], float], ...]
+    extensions: tuple[str, ...] = ()  # names in EXTENSIONS beyond the base model
 
     def directions(self) -> np.ndarray:
         out = np.zeros((camera.N_GENES, len(self.columns)))
@@ -202,7 +203,24 @@ def model_with(extensions: tuple[str, ...]) -> CameraModel:
     for name in extensions:
         columns.extend(EXTENSIONS[name])
     label = "+".join([BASE.name, *extensions]) if extensions else BASE.name
-    return CameraModel(label, tuple(columns))
+    return CameraModel(label, tuple(columns), tuple(extensions))
+
+
+def intrinsic_extensions(genome: np.ndarray, image_size: tuple[int, int]) -> tuple[str, ...]:
+    """The EXTENSIONS a camera already uses beyond square pixels centred in the picture: a
+    hypothesis for an anamorphic frame or a cropped photo starts with them, and a fit from it
+    must move (and pay for) them like any other parameter instead of keeping them frozen."""
+    g = np.asarray(genome, dtype=np.float64)
+    width, height = image_size
+    out: list[str] = []
+    if abs(g[GENE["f_v"]] / g[GENE["f_u"]] - 1.0) > 1e-9:
+        out.append("aspect")
+    if (
+        abs(g[GENE["c_u"]] - (width - 1) / 2.0) > 1e-6
+        or abs(g[GENE["c_v"]] - (height - 1) / 2.0) > 1e-6
+    ):
+        out.append("centre")
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -358,11 +376,13 @@ def select_model(
     maps: EvidenceMaps,
     image_width: int,
 ) -> Fit:
-    """Add model extensions (k2, aspect, centre) one at a time while BIC improves."""
+    """Add model extensions (k2, aspect, centre) to the fit's own one at a time while BIC
+    improves. (Starting from none would freeze the terms the fit already has, e.g. a k2 that
+    ranking the candidates chose, at their values.)"""
     best = base_fit
     n_eff = effective_samples(base_fit, samples, image_width)
-    chosen: tuple[str, ...] = ()
-    remaining = list(EXTENSIONS)
+    chosen = base_fit.model.extensions
+    remaining = [name for name in EXTENSIONS if name not in chosen]
     while remaining:
         trials = []
         for name in remaining:
