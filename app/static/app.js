@@ -89,6 +89,8 @@ async function busyWith(promise) {
   }
 }
 
+const UNAVAILABLE_RETRIES = 3;
+
 function api(path, options = {}) {
   return busyWith(request(path, options));
 }
@@ -101,10 +103,17 @@ async function request(path, options) {
     body = JSON.stringify(options.json);
   }
   let response;
-  try {
-    response = await fetch(path, { method: options.method || "GET", headers, body });
-  } catch (e) {
-    throw new ApiError(0, "network", "The service cannot be reached. Check your connection and try again.");
+  for (let attempt = 0; ; attempt += 1) {
+    try {
+      response = await fetch(path, { method: options.method || "GET", headers, body });
+    } catch (e) {
+      throw new ApiError(0, "network", "The service cannot be reached. Check your connection and try again.");
+    }
+    // 503 means the service did nothing (its database was busy or down for a moment): the
+    // same request is safe to send again after the wait the service asks for
+    if (response.status !== 503 || attempt >= UNAVAILABLE_RETRIES) break;
+    const waitS = Math.min(Number(response.headers.get("Retry-After")) || 2, 10);
+    await new Promise((resolve) => setTimeout(resolve, 1000 * waitS));
   }
   if (!response.ok) throw await errorOf(response);
   const type = response.headers.get("content-type") || "";

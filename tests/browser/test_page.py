@@ -17,6 +17,7 @@ import cv2
 import httpx
 import numpy as np
 import pytest
+from playwright.sync_api import Route
 
 from app.calib import camera, cases
 from tests import renderer
@@ -313,8 +314,24 @@ def test_coach_flow(browser, live, tmp_path: Path, width: int) -> None:
     assert second["id"] != first_cal["id"]
     s.shot("11-demo-done")
 
-    # switch the active calibration back to the first one; both stay in the history
+    # switch the active calibration back to the first one; both stay in the history. The
+    # service's first answer is a 503 (its database busy for a moment, as SQLite is when a
+    # worker writes under load): the page waits the Retry-After and sends the request again.
     wait_settled(s)
+    busy_answers: list[str] = []
+
+    def busy_once(route: Route) -> None:
+        if route.request.method == "POST" and not busy_answers:
+            busy_answers.append(route.request.url)
+            route.fulfill(
+                status=503,
+                headers={"Retry-After": "1", "Content-Type": "application/json"},
+                body='{"error": {"code": "database_unavailable", "message": "retry shortly"}}',
+            )
+        else:
+            route.continue_()
+
+    page.route(f"**/courts/{court_id}/camera", busy_once)
     older = page.locator(f"#history li[data-id='{first_cal['id']}']")
     older.get_by_role("button", name="Make active").click()
     try:
@@ -323,6 +340,11 @@ def test_coach_flow(browser, live, tmp_path: Path, width: int) -> None:
         raise AssertionError(
             f"the first calibration never became active: {page_state(s)}"
         ) from error
+    page.unroute(f"**/courts/{court_id}/camera")
+    assert len(busy_answers) == 1
+    # the browser reports the injected 503 like any error response: it is the only one expected
+    s.problems.console = [p for p in s.problems.console if "503" not in p]
+    s.problems.requests = [p for p in s.problems.requests if not p.startswith("HTTP 503: POST")]
     assert (
         httpx.get(f"{live.url}/courts/{court_id}/camera", headers=auth).json()["id"]
         == (first_cal["id"])
