@@ -408,20 +408,21 @@ def refine_candidates(
 ) -> tuple[int, refine.Fit, np.ndarray]:
     """Refine each candidate (pinhole + k1, coarse to fine; with the non-square pixels or the
     off-centre principal point it was hypothesised with, refitted and paid for with BIC's
-    penalty per parameter) and pick the one with the highest score. A candidate is scored at its best with a second radial term as well
-    (k2): a wide-angle lens that one term cannot follow at the picture's edge would
-    otherwise lose its lines there to the tight tolerance, and the right camera to a wrong one
-    that puts fewer lines at the edge. The second term is kept when it raises the score (a
-    log-likelihood ratio) by more than BIC's penalty for it; the final fit may add more terms on
-    the evidence (`refine.select_model`). Ranking by the verdict first
-    (a camera it takes beats a higher-scoring one it refuses) was measured and dropped: it lets
-    the verdict judge several cameras per picture, and on other sports' courts one of them then
-    passes. Returns the winner's index, its fit and every refined candidate's score."""
+    penalty per parameter) and pick the one with the highest score. A candidate is scored at
+    its best with a second radial term (k2) as well: a wide-angle lens that one term cannot
+    follow at the picture's edge would otherwise lose its lines there to the tight tolerance,
+    and the right camera to a wrong one that puts fewer lines at the edge. The second term is
+    kept when it raises the score (a log-likelihood ratio) by more than BIC's penalty for it;
+    the final fit may add more terms on the evidence (`refine.select_model`). Ranking by the
+    verdict first (a camera it takes beats a higher-scoring one it refuses) was measured and
+    dropped: it lets the verdict judge several cameras per picture, and on other sports'
+    courts one of them then passes. Returns the winner's index, its fit and every refined candidate's score."""
     taus = refine_taus(image_size[0])
     extensions = [refine.intrinsic_extensions(g, image_size) for g in candidates]
+    models = [refine.model_with(ext) for ext in extensions]
     fits = [
-        refine.refine_coarse_to_fine(g, samples, maps, taus, refine.model_with(ext))
-        for g, ext in zip(candidates, extensions, strict=True)
+        refine.refine_coarse_to_fine(g, samples, maps, taus, m)
+        for g, m in zip(candidates, models, strict=True)
     ]
     scores = score_cameras(np.array([f.genome for f in fits]), verify, maps, model, image_size)
     richer = [
@@ -434,9 +435,7 @@ def refine_candidates(
     # every parameter beyond square pixels at the centre and one radial term must earn its
     # place: more than BIC's penalty for each
     penalty = float(np.log(len(samples.points)))
-    extra = penalty * np.array(
-        [refine.model_with(ext).n_params - refine.BASE.n_params for ext in extensions]
-    )
+    extra = penalty * np.array([m.n_params - refine.BASE.n_params for m in models])
     scores, richer_scores = scores - extra, richer_scores - extra
     use_richer = richer_scores > scores + penalty
     scores = np.where(use_richer, richer_scores, scores)
