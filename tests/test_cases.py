@@ -65,6 +65,25 @@ def test_make_case_renders_its_plan_deterministically():
         cases.make_case("beach", 0)
 
 
+def test_some_club_glass_back_walls_carry_no_painted_lines():
+    from app.calib import scene_raycast as rc
+
+    plans = [cases.plan_case(name, seed) for name in ("club", "tripod_phone") for seed in range(24)]
+    club_glass = [p for p in plans if p.style.preset == "club" and p.style.back_glass]
+    bare = [p for p in club_glass if not p.style.back_wall_lines]
+    assert 0.2 < len(bare) / len(club_glass) < 0.8
+    # broadcast glass courts keep their back wall's lines
+    assert all(p.style.back_wall_lines for p in plans if p.style.preset == "glass")
+
+    def back_wall_segments(style: scene.SceneStyle) -> int:
+        arrays = scene.build_scene(style, "wsf", np.zeros(3), np.random.default_rng(0), False)
+        return int((arrays.segs[:, 6] == rc.S_BACK).sum())
+
+    style = bare[0].style
+    assert back_wall_segments(style) == 0
+    assert back_wall_segments(replace(style, back_wall_lines=True)) > 0
+
+
 def test_clips_have_moving_players_and_some_have_a_camera_cut():
     found_cut = False
     for seed in range(6):

@@ -73,6 +73,9 @@ MIN_FLOOR_LINES = 3
 MIN_LINE_PX = 30.0
 MIN_FLOOR_FRACTION = 0.08
 MAX_PLACEMENT_ATTEMPTS = 60
+# Share of club courts' glass back walls rendered without painted lines: many clubs mark the
+# back wall's out line on the glass faintly or not at all (a reasoned guess, not a measurement).
+CLUB_GLASS_BACK_WITHOUT_LINES = 0.5
 
 # floor lines of the court for the visibility rule: name -> (model edges, direction)
 FLOOR_LINES: dict[str, tuple[tuple[str, ...], str]] = {
@@ -1015,6 +1018,14 @@ def _dress(
         )
     if centre[1] > court.length_m and not style.back_glass:
         style = replace(style, back_glass=True)
+    if style.back_glass and placement.preset == "club":
+        # Half the clubs' glass back walls show no out line. Drawn from its own stream, so that
+        # every other draw of a seeded case stays as it was.
+        own = np.random.default_rng(
+            [zlib.crc32(b"back wall lines"), zlib.crc32(placement.genome.tobytes())]
+        )
+        if own.random() < CLUB_GLASS_BACK_WITHOUT_LINES:
+            style = replace(style, back_wall_lines=False)
     if placement.preset == "glass" and centre[1] < court.length_m and rng.random() < 0.7:
         # spectators behind the back glass too, seen from the front or the sides
         style = replace(style, stand_back=True)

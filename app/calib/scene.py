@@ -168,6 +168,8 @@ class SceneStyle:
     # glass
     side_glass: bool = False
     back_glass: bool = True
+    # many clubs' glass back walls carry no painted out line (or one too faint to show)
+    back_wall_lines: bool = True
     glass_tint: tuple[float, float, float] = (1.0, 1.0, 1.0)
     glass_transmit: float = 0.9
     glass_reflect_side: float = 0.0
@@ -424,6 +426,8 @@ def build_scene(
 
     # painted lines, sorted by surface
     rows = painted_segments(model) if style.court else []
+    if not style.back_wall_lines:
+        rows = [row for row in rows if int(row[6]) != rc.S_BACK]
     rows += [tuple(float(v) for v in line) for line in style.extra_lines]
     segs = np.array(rows, dtype=np.float64).reshape(-1, 8)
     segs = segs[np.argsort(segs[:, 6], kind="stable")]
