@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from app.calib import camera, court, lines, scene, search, segments, synthetic
+from app.calib import camera, court, lines, parallel, scene, search, segments, synthetic
 from app.calib.court import floor_grid
 
 SIZE = (960, 540)
@@ -243,6 +243,32 @@ def test_the_true_camera_outscores_moved_ones(rendered):
     assert supported[0].sum() / visible[0].sum() > 0.7
     coarse = search.coarse_scores(cameras, model, maps, (search.rank_tolerance_px(SIZE[0]),))[:, 0]
     assert np.argmax(coarse) == 0
+
+
+def test_scores_split_over_threads_equal_the_serial_ones(rendered, monkeypatch):
+    truth, _, maps = rendered
+    model = court.court_model()
+    samples = search.verify_samples(model)
+    rng = np.random.default_rng(0)
+    # enough cameras that every thread gets rows, and a count no thread count divides evenly
+    cameras = np.repeat(truth[None], 4 * parallel.MIN_ROWS_PER_THREAD + 3, axis=0)
+    cameras[:, camera.GENE["t_x"] : camera.GENE["t_z"] + 1] += rng.normal(0, 0.3, (len(cameras), 3))
+    tolerances = (search.rank_tolerance_px(SIZE[0]), search.verify_tolerance_px(SIZE[0]))
+
+    def scores() -> list[np.ndarray]:
+        return [
+            *search.edge_support(cameras, samples, maps, tolerances[1]),
+            search.coarse_scores(cameras, model, maps, tolerances),
+        ]
+
+    monkeypatch.setattr(parallel, "thread_count", lambda: 4)
+    split = scores()
+    monkeypatch.setattr(parallel, "thread_count", lambda: 1)
+    serial = scores()
+    for a, b in zip(split, serial, strict=True):
+        assert np.array_equal(a, b)
+    assert parallel.row_chunks(10, 4) == [(0, 2), (2, 5), (5, 7), (7, 10)]
+    assert parallel.row_chunks(2, 4) == [(0, 1), (1, 2)]
 
 
 def test_a_line_grazing_the_lens_does_not_win_on_a_few_samples(rendered):

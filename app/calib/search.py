@@ -28,7 +28,7 @@ import cv2
 import numba
 import numpy as np
 
-from app.calib import camera
+from app.calib import camera, parallel
 from app.calib.camera import (
     MIN_SAMPLE_DEPTH_M,
     extrinsics_njit,
@@ -949,9 +949,7 @@ def floor_hypotheses(
     centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
     to_centred = np.array([[1.0, 0.0, -centre[0]], [0.0, 1.0, -centre[1]], [0.0, 0.0, 1.0]])
     court_centre = np.array([model.spec.width_m / 2.0, model.spec.length_m / 2.0])
-    out_h = np.empty((MAX_HYPOTHESES, 3, 3))
-    out_k = np.empty((MAX_HYPOTHESES, 4))
-    homographies, intrinsics = [], []
+    calls = []
     # every (dx / dy)^2 an assignment of floor lines can have
     dxs = (along_values[:, None] - along_values[None, :])[~np.eye(len(along_values), dtype=bool)]
     dys = (across_values[:, None] - across_values[None, :])[~np.eye(len(across_values), dtype=bool)]
@@ -980,28 +978,40 @@ def floor_hypotheses(
             if len(a) < 2 or len(b) < 2:
                 continue
             for vertical in verticals or [np.zeros(3)]:
-                n = _hypotheses_njit(
-                    np.ascontiguousarray(a),
-                    np.ascontiguousarray(b),
-                    across_values,
-                    along_values,
-                    centre,
-                    float(width),
-                    float(height),
-                    FOCAL_RANGE_OF_WIDTH[0] * width,
-                    FOCAL_RANGE_OF_WIDTH[1] * width,
-                    MIN_QUAD_AREA_SHARE * width * height,
-                    np.ascontiguousarray(vertical / max(np.linalg.norm(vertical), 1e-300)),
-                    ALTERNATIVE_LINES_PER_GROUP,
-                    ratios2,
-                    square_centred,
-                    out_h,
-                    out_k,
-                )
-                homographies.append(out_h[:n].copy())
-                intrinsics.append(out_k[:n].copy())
-    if not homographies:
+                unit_vertical = vertical / max(np.linalg.norm(vertical), 1e-300)
+                calls.append((a, b, unit_vertical, square_centred))
+
+    def hypotheses_of(
+        call: tuple[np.ndarray, np.ndarray, np.ndarray, bool],
+    ) -> tuple[np.ndarray, np.ndarray]:
+        a, b, unit_vertical, square_centred = call
+        out_h = np.empty((MAX_HYPOTHESES, 3, 3))
+        out_k = np.empty((MAX_HYPOTHESES, 4))
+        n = _hypotheses_njit(
+            np.ascontiguousarray(a),
+            np.ascontiguousarray(b),
+            across_values,
+            along_values,
+            centre,
+            float(width),
+            float(height),
+            FOCAL_RANGE_OF_WIDTH[0] * width,
+            FOCAL_RANGE_OF_WIDTH[1] * width,
+            MIN_QUAD_AREA_SHARE * width * height,
+            np.ascontiguousarray(unit_vertical),
+            ALTERNATIVE_LINES_PER_GROUP,
+            ratios2,
+            square_centred,
+            out_h,
+            out_k,
+        )
+        return out_h[:n].copy(), out_k[:n].copy()
+
+    found = parallel.ordered_map(hypotheses_of, calls)
+    if not found:
         return np.zeros((0, camera.N_GENES))
+    homographies = [h for h, _ in found]
+    intrinsics = [k for _, k in found]
     all_h = np.concatenate(homographies)
     all_k = np.concatenate(intrinsics)
     keep = distinct_homographies(all_h, all_k, model, width)
@@ -1565,30 +1575,34 @@ def edge_support(
     fold = camera.lens_fold_radii(pop)
     if chance is None or chance.tolerance_px != tolerance_px:
         chance = chance_maps(maps, tolerance_px)
-    _verify_njit(
-        pop,
-        samples.points,
-        samples.directions,
-        samples.edge,
-        samples.painted,
-        samples.p_hit,
-        samples.n_edges,
-        0.02,
-        samples.spacing_m,
-        np.where(np.isfinite(fold), fold**2, 1e12),
-        maps.dist_ridge,
-        maps.near_ridge,
-        maps.dist_any,
-        maps.near_any,
-        maps.normals,
-        maps.ignore.view(np.uint8),
-        float(tolerance_px),
-        float(np.sin(max_angle_rad)),
-        chance.values,
-        chance.scale,
-        supported,
-        visible,
-        llr,
+    fold_tan2 = np.where(np.isfinite(fold), fold**2, 1e12)
+    parallel.over_rows(
+        len(pop),
+        lambda a, b: _verify_njit(
+            pop[a:b],
+            samples.points,
+            samples.directions,
+            samples.edge,
+            samples.painted,
+            samples.p_hit,
+            samples.n_edges,
+            0.02,
+            samples.spacing_m,
+            fold_tan2[a:b],
+            maps.dist_ridge,
+            maps.near_ridge,
+            maps.dist_any,
+            maps.near_any,
+            maps.normals,
+            maps.ignore.view(np.uint8),
+            float(tolerance_px),
+            float(np.sin(max_angle_rad)),
+            chance.values,
+            chance.scale,
+            supported[a:b],
+            visible[a:b],
+            llr[a:b],
+        ),
     )
     return supported, visible, llr
 
@@ -1689,23 +1703,28 @@ def coarse_scores(
     same = np.concatenate([[False], samples.edge[1:] == samples.edge[:-1]])
     chances = np.stack([chance_maps(maps, tol).values for tol in tolerances_px])
     out = np.empty((len(genomes), len(tolerances_px)))
-    _coarse_njit(
-        np.ascontiguousarray(camera.as_population(genomes)),
-        samples.points,
-        same,
-        samples.p_hit,
-        samples.painted,
-        maps.dist_ridge,
-        maps.near_ridge,
-        maps.dist_any,
-        maps.near_any,
-        maps.normals,
-        maps.ignore.view(np.uint8),
-        np.array(tolerances_px, dtype=np.float64),
-        float(np.sin(VERIFY_MAX_ANGLE_RAD)),
-        chances,
-        CHANCE_SCALE,
-        out,
+    pop = np.ascontiguousarray(camera.as_population(genomes))
+    tolerances = np.array(tolerances_px, dtype=np.float64)
+    parallel.over_rows(
+        len(pop),
+        lambda a, b: _coarse_njit(
+            pop[a:b],
+            samples.points,
+            same,
+            samples.p_hit,
+            samples.painted,
+            maps.dist_ridge,
+            maps.near_ridge,
+            maps.dist_any,
+            maps.near_any,
+            maps.normals,
+            maps.ignore.view(np.uint8),
+            tolerances,
+            float(np.sin(VERIFY_MAX_ANGLE_RAD)),
+            chances,
+            CHANCE_SCALE,
+            out[a:b],
+        ),
     )
     return out
 
