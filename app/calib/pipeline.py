@@ -31,7 +31,18 @@ from typing import Any
 import cv2
 import numpy as np
 
-from app.calib import camera, edges, lines, quality, refine, render, search, segments, surfaces
+from app.calib import (
+    camera,
+    edges,
+    lines,
+    parallel,
+    quality,
+    refine,
+    render,
+    search,
+    segments,
+    surfaces,
+)
 from app.calib.court import COURT_SPECS, CourtModel, court_model, sample_edges
 from app.calib.fitness import population_fitness
 from app.calib.ga import DEFAULT_BUNDLE, GAResult, get_bundle, run_ga
@@ -318,12 +329,14 @@ def search_cameras(
     polish_samples = refine.fit_samples(model, 2.0 * refine.spacing_for_width(width))
     taus = tuple(max(2.0, tau * width / 1920.0) for tau in POLISH_TAUS_AT_1920)
     polished = np.array(
-        [
-            refine.refine_coarse_to_fine(
-                genomes[i], polish_samples, maps, taus, refine.BASE, POLISH_EVALUATIONS
-            ).genome
-            for i in chosen
-        ]
+        parallel.ordered_map(
+            lambda i: (
+                refine.refine_coarse_to_fine(
+                    genomes[i], polish_samples, maps, taus, refine.BASE, POLISH_EVALUATIONS
+                ).genome
+            ),
+            chosen,
+        )
     ).reshape(-1, camera.N_GENES)
     traced("polished", polished)
     _, _, polished_scores = search.edge_support(polished, verify, maps, tight_tolerance)
@@ -420,15 +433,18 @@ def refine_candidates(
     taus = refine_taus(image_size[0])
     extensions = [refine.intrinsic_extensions(g, image_size) for g in candidates]
     models = [refine.model_with(ext) for ext in extensions]
-    fits = [
-        refine.refine_coarse_to_fine(g, samples, maps, taus, m)
-        for g, m in zip(candidates, models, strict=True)
-    ]
+    # each fit is independent: they run side by side (the residuals release the GIL)
+    fits = parallel.ordered_map(
+        lambda gm: refine.refine_coarse_to_fine(gm[0], samples, maps, taus, gm[1]),
+        list(zip(candidates, models, strict=True)),
+    )
     scores = score_cameras(np.array([f.genome for f in fits]), verify, maps, model, image_size)
-    richer = [
-        refine.refine_coarse_to_fine(g, samples, maps, taus, refine.model_with((*ext, "k2")))
-        for g, ext in zip(candidates, extensions, strict=True)
-    ]
+    richer = parallel.ordered_map(
+        lambda ge: refine.refine_coarse_to_fine(
+            ge[0], samples, maps, taus, refine.model_with((*ge[1], "k2"))
+        ),
+        list(zip(candidates, extensions, strict=True)),
+    )
     richer_scores = score_cameras(
         np.array([f.genome for f in richer]), verify, maps, model, image_size
     )

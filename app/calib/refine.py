@@ -26,7 +26,7 @@ import numba
 import numpy as np
 from scipy import optimize
 
-from app.calib import camera
+from app.calib import camera, parallel
 from app.calib.camera import GENE, project_point_njit, seen_pixel_njit
 from app.calib.court import CourtModel, sample_edges
 from app.calib.lines import EvidenceMaps
@@ -350,9 +350,12 @@ def best_of_perturbed_starts(
     it, is a local minimum that a single descent does not leave. Seeded: a calibration repeats
     exactly."""
     rng = np.random.default_rng(seed)
+    starts = list(perturbed_cameras(fit.genome, n_starts, rng))
+    trials = parallel.ordered_map(
+        lambda start: refine_coarse_to_fine(start, samples, maps, taus_px, fit.model), starts
+    )
     best = fit
-    for start in perturbed_cameras(fit.genome, n_starts, rng):
-        trial = refine_coarse_to_fine(start, samples, maps, taus_px, fit.model)
+    for trial in trials:
         if trial.cost < best.cost:
             best = trial
     return best
