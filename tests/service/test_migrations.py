@@ -8,7 +8,7 @@ import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
-from sqlalchemy import inspect
+from sqlalchemy import CheckConstraint, inspect
 
 from app.db import queue
 from app.db.migrate import alembic_config, current_revision, head_revision, upgrade_head
@@ -29,6 +29,16 @@ def _assert_schema_matches_models(settings: Settings) -> None:
             context = MigrationContext.configure(conn, opts={"compare_type": True})
             assert compare_metadata(context, Base.metadata) == []
             tables = set(inspect(conn).get_table_names())
+            # compare_metadata does not compare CHECK constraints: their names must match too
+            # (0003 created doubled ones, "ck_jobs_ck_jobs_status")
+            for table in ("jobs", "job_attempts"):
+                migrated = {c["name"] for c in inspect(conn).get_check_constraints(table)}
+                modelled = {
+                    c.name
+                    for c in Base.metadata.tables[table].constraints
+                    if isinstance(c, CheckConstraint)
+                }
+                assert migrated == modelled, table
         assert tables == set(Base.metadata.tables) | {"alembic_version"}
         # and back down to nothing, and up again
         command.downgrade(alembic_config(settings), "base")
