@@ -23,7 +23,7 @@ _T = TypeVar("_T")
 _R = TypeVar("_R")
 
 _pool: ThreadPoolExecutor | None = None
-_pool_pid = 0
+_pool_key = (0, 0)  # (process id, threads) the pool was made for
 
 
 def thread_count() -> int:
@@ -36,11 +36,15 @@ def thread_count() -> int:
 
 
 def _executor() -> ThreadPoolExecutor:
-    global _pool, _pool_pid
-    # a forked child inherits the parent's pool object but none of its threads
-    if _pool is None or _pool_pid != os.getpid():
-        _pool = ThreadPoolExecutor(max_workers=thread_count(), thread_name_prefix="kernel")
-        _pool_pid = os.getpid()
+    """The process's pool, as many threads as `thread_count` says now (a forked child inherits
+    the parent's pool object but none of its threads; a changed setting gets a new pool)."""
+    global _pool, _pool_key
+    key = (os.getpid(), thread_count())
+    if _pool is None or _pool_key != key:
+        if _pool is not None and _pool_key[0] == key[0]:
+            _pool.shutdown(wait=False)
+        _pool = ThreadPoolExecutor(max_workers=key[1], thread_name_prefix="kernel")
+        _pool_key = key
     return _pool
 
 

@@ -436,14 +436,14 @@ def refine_candidates(
     # each fit is independent: they run side by side (the residuals release the GIL)
     fits = parallel.ordered_map(
         lambda gm: refine.refine_coarse_to_fine(gm[0], samples, maps, taus, gm[1]),
-        list(zip(candidates, models, strict=True)),
+        zip(candidates, models, strict=True),
     )
     scores = score_cameras(np.array([f.genome for f in fits]), verify, maps, model, image_size)
     richer = parallel.ordered_map(
         lambda ge: refine.refine_coarse_to_fine(
             ge[0], samples, maps, taus, refine.model_with((*ge[1], "k2"))
         ),
-        list(zip(candidates, extensions, strict=True)),
+        zip(candidates, extensions, strict=True),
     )
     richer_scores = score_cameras(
         np.array([f.genome for f in richer]), verify, maps, model, image_size

@@ -1010,10 +1010,8 @@ def floor_hypotheses(
     found = parallel.ordered_map(hypotheses_of, calls)
     if not found:
         return np.zeros((0, camera.N_GENES))
-    homographies = [h for h, _ in found]
-    intrinsics = [k for _, k in found]
-    all_h = np.concatenate(homographies)
-    all_k = np.concatenate(intrinsics)
+    all_h = np.concatenate([h for h, _ in found])
+    all_k = np.concatenate([k for _, k in found])
     keep = distinct_homographies(all_h, all_k, model, width)
     all_h = np.ascontiguousarray(all_h[keep])
     all_k = np.ascontiguousarray(all_k[keep])
