@@ -271,6 +271,30 @@ def test_scores_split_over_threads_equal_the_serial_ones(rendered, monkeypatch):
     assert parallel.row_chunks(2, 4) == [(0, 1), (1, 2)]
 
 
+def test_one_image_line_is_evidence_for_one_court_line(rendered):
+    """A camera laying two court lines on the same marks is not paid twice for them."""
+    truth, _, maps = rendered
+    one = search.verify_samples(court.court_model().subset(["half_court"]))
+    twice = search.VerifySamples(
+        points=np.vstack([one.points, one.points]),
+        directions=np.vstack([one.directions, one.directions]),
+        edge=np.concatenate([one.edge, one.edge + 1]),
+        painted=np.concatenate([one.painted, one.painted]),
+        p_hit=np.concatenate([one.p_hit, one.p_hit]),
+        spacing_m=one.spacing_m,
+        n_edges=2,
+    )
+    tolerance = search.verify_tolerance_px(SIZE[0])
+    supported_one, visible_one, llr_one = search.edge_support(truth, one, maps, tolerance)
+    supported_twice, visible_twice, llr_twice = search.edge_support(truth, twice, maps, tolerance)
+    assert llr_one[0] > 0
+    # the second copy only adds the misses of its unsupported samples
+    assert 0.9 * llr_one[0] < llr_twice[0] <= llr_one[0]
+    # what each edge's verdict sees is unchanged
+    assert np.allclose(supported_twice[0], supported_one[0, 0])
+    assert np.allclose(visible_twice[0], visible_one[0, 0])
+
+
 def test_a_line_grazing_the_lens_does_not_win_on_a_few_samples(rendered):
     truth, _, maps = rendered
     samples = search.verify_samples(court.court_model())

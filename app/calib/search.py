@@ -1437,8 +1437,9 @@ def _sample_evidence(
     max_sin: float,
     chance: np.ndarray,
     chance_scale: int,
-) -> tuple[float, float]:
-    """(support in [0, 1], log-likelihood ratio per tolerance length) of one court sample seen
+) -> tuple[float, float, int]:
+    """(support in [0, 1], log-likelihood ratio per tolerance length, index of the nearest
+    evidence pixel of the right kind or -1) of one court sample seen
     at pixel (iu, iv) with its line running (du, dv) over step_px: support when evidence of the
     right kind (ridges for painted lines) lies within `tolerance` and runs the same way, against
     the chance of such support here for a line with this normal (direction bins interpolated)."""
@@ -1468,7 +1469,7 @@ def _sample_evidence(
     cv = min(iv // chance_scale, chance.shape[1] - 1)
     c = (1.0 - frac) * chance[b0, cv, cu] + frac * chance[b1, cv, cu]
     llr = support * np.log(p_hit / c) + (1.0 - support) * np.log((1.0 - p_hit) / (1.0 - c))
-    return support, llr
+    return support, llr, k
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1488,6 +1489,7 @@ def _verify_njit(
     dist_any: np.ndarray,
     near_any: np.ndarray,
     normals: np.ndarray,
+    evidence_points: np.ndarray,
     ignore: np.ndarray,
     tolerance: float,
     max_sin: float,
@@ -1498,9 +1500,18 @@ def _verify_njit(
     llr: np.ndarray,
 ) -> None:
     """Per camera and court edge: supported and visible projected length (px); per camera the
-    log-likelihood ratio of the evidence under "the court is here" against chance."""
+    log-likelihood ratio of the evidence under "the court is here" against chance.
+
+    One mark in the picture is evidence for one court line: a sample supported by evidence in a
+    tolerance-sized cell of the picture that another edge of the same camera already took adds
+    nothing to the ratio (its supported length still counts). Otherwise a wrong camera that
+    squeezes several court lines onto the same few marks is paid for each of them."""
     h, w = ignore.shape
     max_sample_px = MAX_SAMPLE_SHARE_OF_DIAGONAL * np.sqrt(h * h + w * w)
+    cell_px = max(tolerance, 1.0)
+    # owner[cell] = row * n_edges + edge of the last camera row that took the cell; rows are
+    # distinct, so the grid needs no clearing between cameras
+    owner = np.full((int(h / cell_px) + 1, int(w / cell_px) + 1), -1, np.int64)
     r = np.empty((3, 3))
     t = np.empty(3)
     for i in range(pop.shape[0]):
@@ -1533,7 +1544,7 @@ def _verify_njit(
             length_px = min(step_px * (spacing_m / step_m), max_sample_px)
             e = edge[j]
             visible[i, e] += length_px
-            support, sample_llr = _sample_evidence(
+            support, sample_llr, k = _sample_evidence(
                 iu,
                 iv,
                 du,
@@ -1552,6 +1563,14 @@ def _verify_njit(
                 chance_scale,
             )
             supported[i, e] += length_px * support
+            if support > 0.0:
+                cv = min(max(int(evidence_points[k, 1] / cell_px), 0), owner.shape[0] - 1)
+                cu = min(max(int(evidence_points[k, 0] / cell_px), 0), owner.shape[1] - 1)
+                taker = owner[cv, cu]
+                stamp = i * n_edges + e
+                if i * n_edges <= taker < stamp or stamp < taker < (i + 1) * n_edges:
+                    continue
+                owner[cv, cu] = stamp
             total += (length_px / tolerance) * sample_llr
         llr[i] = total
 
@@ -1592,6 +1611,7 @@ def edge_support(
             maps.dist_any,
             maps.near_any,
             maps.normals,
+            maps.points,
             maps.ignore.view(np.uint8),
             float(tolerance_px),
             float(np.sin(max_angle_rad)),
@@ -1655,7 +1675,7 @@ def _coarse_njit(
                 if step > 0.0 and not ignore[iv, iu]:
                     length = min(step, max_sample_px)
                     for k in range(tolerances.shape[0]):
-                        _, sample_llr = _sample_evidence(
+                        _, sample_llr, _ = _sample_evidence(
                             iu,
                             iv,
                             du,
