@@ -92,6 +92,8 @@ def test_typical_right_figures_are_good():
         ({"floor_share": 0.01}, "film the floor"),
         ({"absent_fraction": 0.7}, "has no line there"),
         ({"camera_in_play_volume": 1.0}, "where the players play"),
+        ({"pixel_aspect": 0.89, "wall_edges_supported": 2.0}, "non-square pixels"),
+        ({"principal_point_offset_share": 0.2, "wall_edges_supported": 2.0}, "off-centre"),
     ],
 )
 def test_each_rule_refuses_with_its_reason(change, words):
@@ -99,6 +101,13 @@ def test_each_rule_refuses_with_its_reason(change, words):
     judged = quality.verdict(figures)
     assert judged.label == "not_a_court"
     assert any(words in reason for reason in judged.reasons), judged.reasons
+
+
+def test_a_camera_with_free_intrinsics_and_wall_lines_passes():
+    figures = {**_typical_right(), "pixel_aspect": 0.75, "principal_point_offset_share": 0.3}
+    assert quality.verdict({**figures, "wall_edges_supported": 3.0}).label == "good"
+    # square pixels at the centre need one wall line only
+    assert quality.verdict({**_typical_right(), "wall_edges_supported": 1.0}).label == "good"
 
 
 def test_doubtful_figures_ask_for_a_check():

@@ -564,6 +564,14 @@ def judge_camera(
     figures["rms_px"] = fit.rms_px
     figures["floor_share"] = float(search.floor_shares(fit.genome, model, image_size)[0])
     figures["camera_in_play_volume"] = float(search.in_play_volume(fit.genome, model)[0])
+    figures["pixel_aspect"] = float(fit.genome[camera.GENE["f_v"]] / fit.genome[camera.GENE["f_u"]])
+    figures["principal_point_offset_share"] = float(
+        np.hypot(
+            fit.genome[camera.GENE["c_u"]] - (image_size[0] - 1) / 2.0,
+            fit.genome[camera.GENE["c_v"]] - (image_size[1] - 1) / 2.0,
+        )
+        / image_size[0]
+    )
     figures.update({f"search_{k}": v for k, v in search_info.items()})
     return quality.verdict(figures), uncertainty
 

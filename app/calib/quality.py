@@ -71,6 +71,17 @@ MIN_SUPPORTED_EDGES = 10
 MIN_SUPPORTED_SHARE_OF_EDGES = 0.45
 MIN_SUPPORTED_SHARE_OF_RELIABLE_EDGES = 0.5
 MIN_WALL_EDGES = 1
+# A camera with non-square pixels or an off-centre principal point has the 8 degrees of freedom
+# of a general floor homography (square pixels at the centre leave 7): its floor lines fit any
+# grid of lines across and along, whatever its proportions, so the floor alone no longer says
+# "squash court" (on held-out seeds 4000+ a volleyball court passed every other rule with a
+# camera of pixel aspect 0.89 and one wall line). The walls must then say it: lines on the walls
+# in more than one place. On bench.synthetic the right cameras with such intrinsics had 8 or
+# more wall lines supported (anamorphic broadcast frames and cropped photos show the front wall).
+MIN_WALL_EDGES_FREE_INTRINSICS = 3
+# what counts as non-square pixels / an off-centre principal point (share of the width)
+FREE_ASPECT = 0.01
+FREE_PRINCIPAL_POINT_SHARE = 0.01
 MIN_FLOOR_ACROSS = 3
 MIN_FLOOR_ALONG = 2
 MIN_SUPPORT_EXCESS = 0.35
@@ -117,6 +128,13 @@ def _floor_edge_directions(model: CourtModel) -> tuple[np.ndarray, np.ndarray]:
     across = floor & (a[:, 1] == b[:, 1])
     along = floor & (a[:, 0] == b[:, 0])
     return across, along
+
+
+def _upright_edges(model: CourtModel) -> np.ndarray:
+    """bool (E,): vertical edges (the walls' corners)."""
+    a = model.nodes[model.edges[:, 0]]
+    b = model.nodes[model.edges[:, 1]]
+    return (a[:, 0] == b[:, 0]) & (a[:, 1] == b[:, 1])
 
 
 @dataclass(frozen=True)
@@ -168,6 +186,7 @@ def quality_figures(
         ),
         "supported_share_of_edges": float(good_edge.sum() / max(in_view.sum(), 1)),
         "wall_edges_supported": float((good_edge & walls).sum()),
+        "upright_wall_edges_supported": float((good_edge & _upright_edges(model)).sum()),
         "log_likelihood_ratio_per_px": float(llr[0] / total_visible) if total_visible else 0.0,
         "floor_across_supported": float((good_edge & across).sum()),
         "floor_along_supported": float((good_edge & along).sum()),
@@ -179,6 +198,14 @@ def quality_figures(
         "log_likelihood_ratio": float(llr[0]),
         "tolerance_px": tolerance,
     }
+
+
+def free_intrinsics(figures: dict[str, float]) -> bool:
+    """Whether the camera has non-square pixels or an off-centre principal point."""
+    return (
+        abs(figures.get("pixel_aspect", 1.0) - 1.0) > FREE_ASPECT
+        or figures.get("principal_point_offset_share", 0.0) > FREE_PRINCIPAL_POINT_SHARE
+    )
 
 
 def verdict(figures: dict[str, float]) -> Verdict:
@@ -212,6 +239,15 @@ def verdict(figures: dict[str, float]) -> Verdict:
         refusals.append(
             "no line on the walls (tin, service line, out lines) was found where the camera puts "
             "them: this may be another sport's court, or the walls are out of the picture"
+        )
+    elif free_intrinsics(figures) and figures["wall_edges_supported"] < (
+        MIN_WALL_EDGES_FREE_INTRINSICS
+    ):
+        refusals.append(
+            f"only {figures['wall_edges_supported']:.0f} of the court's wall lines were found "
+            "for a camera with non-square pixels or an off-centre picture: such a camera can lay a "
+            f"court on any grid of floor lines, so it needs {MIN_WALL_EDGES_FREE_INTRINSICS} "
+            "wall lines (tin, service line, out lines, corners) to tell a squash court"
         )
     if figures["support_excess"] < MIN_SUPPORT_EXCESS:
         refusals.append(
