@@ -13,8 +13,9 @@ RMS pixel distance (the model's line samples in view, both cameras). A camera is
 median floor error is <= 5 cm and the lines are within 2 px RMS.
 
 Per class it prints: found (accepted and right), refused, wrong cameras accepted (the outcome
-that matters most: a wrong camera is worse than none), the verdicts, and the median floor error
-and time of the found ones; then the negatives accepted. Every case's figures go to a CSV in
+that matters most: a wrong camera is worse than none) and among them those whose floor is off
+(median floor error over 5 cm; the others fail on the lines' RMS only), the verdicts, and the
+median floor error and time of the found ones; then the negatives accepted. Every case's figures go to a CSV in
 bench/out (the verdict's thresholds are calibrated on it: `--calibrate` prints the candidate
 thresholds' false-accept and false-reject rates).
 """
@@ -188,6 +189,9 @@ def report(outcomes: list[Outcome], classes: list[str]) -> str:
         found = [o for o in group if o.accepted and o.right]
         refused = [o for o in group if not o.accepted]
         wrong = [o for o in group if o.accepted and not o.right]
+        # what matters for feet on the floor: the floor itself off (the lines test also fails
+        # cameras whose floor is right and whose wall lines at the picture's edge are not)
+        floor_wrong = [o for o in wrong if not o.floor_median_cm <= FOUND_FLOOR_CM]
         right_refused = [o for o in refused if o.right]
         good = sum(o.verdict == "good" for o in found)
         rows.append(
@@ -198,6 +202,7 @@ def report(outcomes: list[Outcome], classes: list[str]) -> str:
                 _pct(len(refused), n),
                 _pct(len(right_refused), n),
                 _pct(len(wrong), n),
+                _pct(len(floor_wrong), n),
                 f"{good}/{len(found) - good}",
                 f"{np.median([o.floor_median_cm for o in found]):.2f}" if found else "-",
                 f"{np.median([o.lines_rms_px for o in found]):.2f}" if found else "-",
@@ -213,6 +218,7 @@ def report(outcomes: list[Outcome], classes: list[str]) -> str:
             "refused %",
             "(right cam) %",
             "wrong accepted %",
+            "(floor off) %",
             "good/check",
             "floor cm",
             "lines px",
