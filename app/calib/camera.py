@@ -310,6 +310,13 @@ def lens_fold_radii(genomes: np.ndarray) -> np.ndarray:
     return out
 
 
+def lens_fold_tan2(genomes: np.ndarray) -> np.ndarray:
+    """Squared `lens_fold_radii` (N,), as `seen_pixel_njit` takes them: a large finite number
+    where a lens does not fold (the kernels compare squares and want no infinities)."""
+    fold = lens_fold_radii(genomes)
+    return np.where(np.isfinite(fold), fold**2, 1e12)
+
+
 def lens_fold_radius(genome: np.ndarray) -> float:
     """`lens_fold_radii` of one camera."""
     return float(lens_fold_radii(genome)[0])

@@ -139,13 +139,12 @@ def residuals(
     pop = np.ascontiguousarray(camera.as_population(genomes))
     out = np.empty((len(pop), len(samples.points)))
     raw = np.empty_like(out)
-    fold = camera.lens_fold_radii(pop)
     _residuals_njit(
         pop,
         samples.points,
         samples.directions,
         samples.use_ridge,
-        np.where(np.isfinite(fold), fold**2, 1e12),
+        camera.lens_fold_tan2(pop),
         maps.near_ridge,
         maps.near_any,
         maps.points,

@@ -1589,10 +1589,9 @@ def edge_support(
     supported = np.empty((len(pop), samples.n_edges))
     visible = np.empty((len(pop), samples.n_edges))
     llr = np.empty(len(pop))
-    fold = camera.lens_fold_radii(pop)
     if chance is None or chance.tolerance_px != tolerance_px:
         chance = chance_maps(maps, tolerance_px)
-    fold_tan2 = np.where(np.isfinite(fold), fold**2, 1e12)
+    fold_tan2 = camera.lens_fold_tan2(pop)
     parallel.over_rows(
         len(pop),
         lambda a, b: _verify_njit(
