@@ -85,7 +85,7 @@ def test_typical_right_figures_are_good():
         ({"floor_along_supported": 1.0}, "do not pin the floor down"),
         ({"floor_across_supported": 2.0}, "do not pin the floor down"),
         ({"supported_edges": 9.0}, "only 9 court lines"),
-        ({"supported_share_of_edges": 0.4}, "only 40% of the court lines"),
+        ({"supported_share_of_edges": 0.25}, "only 25% of the court lines"),
         ({"supported_share_of_reliable_edges": 0.4}, "only 40% of the painted court lines"),
         ({"support_excess": 0.2, "support_fraction": 0.3}, "by chance"),
         ({"floor_error_t_cm": 80.0}, "do not pin the camera down"),
