@@ -15,9 +15,9 @@ median floor error is <= 5 cm and the lines are within 2 px RMS.
 Per class it prints: found (accepted and right), refused, wrong cameras accepted (the outcome
 that matters most: a wrong camera is worse than none) and among them those whose floor is off
 (median floor error over 5 cm; the others fail on the lines' RMS only), the verdicts, and the
-median floor error and time of the found ones; then the negatives accepted. Every case's figures go to a CSV in
-bench/out (the verdict's thresholds are calibrated on it: `--calibrate` prints the candidate
-thresholds' false-accept and false-reject rates).
+median floor error and time of the found ones; then the negatives accepted. Every case's figures
+go to a CSV in bench/out (the verdict's thresholds are calibrated on it: `--calibrate` prints the
+candidate thresholds' false-accept and false-reject rates).
 """
 
 from __future__ import annotations

@@ -1568,8 +1568,8 @@ def _verify_njit(
                 cu = min(max(int(evidence_points[k, 0] / cell_px), 0), owner.shape[1] - 1)
                 taker = owner[cv, cu]
                 stamp = i * n_edges + e
-                if i * n_edges <= taker < stamp or stamp < taker < (i + 1) * n_edges:
-                    continue
+                if taker // n_edges == i and taker != stamp:
+                    continue  # another edge of this camera took the mark (-1: nobody's)
                 owner[cv, cu] = stamp
             total += (length_px / tolerance) * sample_llr
         llr[i] = total
