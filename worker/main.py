@@ -4,7 +4,7 @@ Leases: a heartbeat thread renews the job's lease at least every `heartbeat_s` (
 progress, at most every `progress_interval_s`) while the main thread computes. If the lease is lost
 (the worker stalled past it and another worker took the job) the result is discarded.
 SIGTERM/SIGINT: stop claiming, let the current job finish within `shutdown_grace_s`, otherwise give
-it back to the queue.
+it back to the queue; during the start-up warm-up, stop at once.
 
 The database may be away for a while: every write the worker makes is retried or left to the lease
 (an unrecorded job is reclaimed when its lease runs out), and nothing that goes wrong with one job
@@ -56,6 +56,12 @@ HARD_EXIT_AFTER_S = 10.0
 # Waits between tries of a database write that failed (doubling up to the last).
 DB_RETRY_FIRST_S = 0.2
 DB_RETRY_MAX_S = 5.0
+
+
+class StoppedWhileWarmingUp(BaseException):
+    """SIGTERM/SIGINT during the warm-up: no job is held, so the worker stops at once instead of
+    compiling its kernels first (tens of seconds with an empty cache on a busy machine). A
+    BaseException, so that the warm-up's own "log and go on" does not swallow it."""
 
 
 class JobAborted(Exception):
@@ -423,14 +429,25 @@ def run_worker(settings: Settings, once: bool = False, worker_id: str | None = N
     worker_id = worker_id or default_worker_id()
     shutdown = Shutdown(threading.Event())
 
+    warming_up = threading.Event()
+
     def on_signal(signum: int, frame: object) -> None:
         log.info("signal %d: no new jobs; finishing the current one", signum)
+        first = not shutdown.requested.is_set()
         shutdown.request(settings.shutdown_grace_s)
+        if first and warming_up.is_set():
+            raise StoppedWhileWarmingUp
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
     if settings.warm_up:  # before the first claim, so that no job pays the kernels' compile
-        warmup.warm_up_best_effort(warmup.WORKER_PARTS)
+        try:
+            warming_up.set()
+            warmup.warm_up_best_effort(warmup.WORKER_PARTS)
+            warming_up.clear()
+        except StoppedWhileWarmingUp:
+            log.info("worker %s stopped during the warm-up", worker_id)
+            return 0
     engine = make_engine(settings)
     log.info("worker %s polling %s", worker_id, engine.url.render_as_string(hide_password=True))
     try:

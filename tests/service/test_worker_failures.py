@@ -4,7 +4,12 @@ is away while the failure is recorded."""
 from __future__ import annotations
 
 import logging
+import os
+import signal
+import subprocess
+import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -145,3 +150,49 @@ def test_a_database_away_for_good_does_not_kill_the_worker(settings: Settings, m
         assert job_row(engine, job_id).status == JobStatus.RUNNING
     finally:
         engine.dispose()
+
+
+# A worker whose warm-up is slow (an empty numba cache on a busy machine compiles for tens of
+# seconds; here a stand-in that reports it has begun and sleeps), run as its own process.
+SLOW_WARM_UP_WORKER = """
+import sys, time
+from pathlib import Path
+from app.calib import warmup
+from app.settings import get_settings
+from worker import main as worker_main
+
+def slow_warm_up(parts):
+    Path(sys.argv[1]).touch()
+    time.sleep(120)
+
+warmup.warm_up = slow_warm_up
+sys.exit(worker_main.run_worker(get_settings(), worker_id="slow-warm-up"))
+"""
+
+
+def test_sigterm_during_the_warm_up_stops_the_worker_at_once(settings: Settings) -> None:
+    """It holds no job yet: nothing to finish, so it must not compile on before it stops (a
+    supervisor, or a test, that waits a bounded time for it would otherwise kill it)."""
+    started = settings.data_dir / "warm-up-started"
+    env = {**os.environ, "SQUASHCAL_DATA_DIR": str(settings.data_dir), "SQUASHCAL_WARM_UP": "1"}
+    process = subprocess.Popen(
+        [sys.executable, "-c", SLOW_WARM_UP_WORKER, str(started)],
+        cwd=Path(__file__).resolve().parents[2],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not started.exists():
+            assert process.poll() is None, process.communicate()[0].decode()
+            assert time.monotonic() < deadline, "the warm-up never began"
+            time.sleep(0.05)
+        process.send_signal(signal.SIGTERM)
+        code = process.wait(10)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    output = process.communicate()[0].decode()
+    assert code == 0, output
+    assert "stopped during the warm-up" in output
