@@ -537,6 +537,13 @@ def from_opencv(camera: Mapping[str, Any]) -> np.ndarray:
     )
 
 
+def picture_centre(image_size: Sequence[int]) -> np.ndarray:
+    """(u, v) of the picture's centre: pixel centres are at integer coordinates (pixel (0, 0)
+    spans -0.5 .. 0.5), so a W x H picture's centre is ((W - 1) / 2, (H - 1) / 2). A principal
+    point there is what "centred" means throughout."""
+    return np.array([(image_size[0] - 1) / 2.0, (image_size[1] - 1) / 2.0])
+
+
 def check_image_size(image_size: Sequence[int]) -> tuple[int, int]:
     """(width, height) as ints, at least 2 x 2; ValueError otherwise."""
     if len(image_size) != 2:

@@ -35,6 +35,7 @@ from app.calib.camera import (
     court_extrinsics,
     from_opencv,
     lens_fold_radius,
+    picture_centre,
     pixel_to_floor,
     project_points,
     undistort_normalized,
@@ -159,7 +160,7 @@ def make_genome(
     rotation: np.ndarray,
     f_u: float,
     f_v: float,
-    principal: tuple[float, float],
+    principal: Sequence[float],
     dist: tuple[float, float, float, float, float],
 ) -> np.ndarray:
     rvec, _ = cv2.Rodrigues(rotation)
@@ -215,15 +216,16 @@ def frame_camera(
     tighter axis (fill > 1 crops them). `aspect` = f_v / f_u; `principal` defaults to the centre;
     `shift` moves the framed points by fractions of the picture."""
     width, height = size
-    cu, cv = principal if principal is not None else ((width - 1) / 2.0, (height - 1) / 2.0)
+    cu, cv = principal if principal is not None else picture_centre(size)
     rotation = _centre_on(centre, points, roll, dist)
     xy = _distorted_normalised(rotation, centre, points, dist)
     span = xy.max(axis=0) - xy.min(axis=0)
     f_u = fill * min(width / max(span[0], 1e-6), height / max(span[1] * aspect, 1e-6))
     mid = 0.5 * (xy.min(axis=0) + xy.max(axis=0))
     # the points' middle lands at the picture centre (+ shift), whatever the principal point
-    target_u = (width - 1) / 2.0 + shift[0] * width
-    target_v = (height - 1) / 2.0 + shift[1] * height
+    middle_u, middle_v = picture_centre(size)
+    target_u = middle_u + shift[0] * width
+    target_v = middle_v + shift[1] * height
     du = (target_u - cu) / f_u - mid[0]
     dv = (target_v - cv) / (f_u * aspect) - mid[1]
     axis = rotation[2] - du * rotation[0] - dv * rotation[1]
@@ -549,7 +551,7 @@ def _place(rng: np.random.Generator, class_name: str, spec: str) -> _Placement:
         rotation = look_at_rotation(centre, target, float(np.radians(rng.normal(0, 1.5))))
         f = f_rel * size[0]
         g = make_genome(
-            centre, rotation, f, f, ((size[0] - 1) / 2, (size[1] - 1) / 2), _fold_safe_dist(rng, k1)
+            centre, rotation, f, f, tuple(picture_centre(size)), _fold_safe_dist(rng, k1)
         )
         return _Placement(g, size, "club" if rng.random() < 0.6 else "glass", inside)
     if class_name == "wide_angle":
@@ -712,10 +714,11 @@ def _place(rng: np.random.Generator, class_name: str, spec: str) -> _Placement:
             )
             return _Placement(g, size, preset, False)
         size = _size(rng, PHOTO_SIZES)
-        cu = (size[0] - 1) / 2 + float(rng.choice([-1.0, 1.0])) * float(
-            rng.uniform(0.15, 0.45)
-        ) * size[0]
-        cv = (size[1] - 1) / 2 + float(rng.uniform(-0.4, 0.4)) * size[1]
+        cu = (
+            picture_centre(size)[0]
+            + float(rng.choice([-1.0, 1.0])) * float(rng.uniform(0.15, 0.45)) * size[0]
+        )
+        cv = picture_centre(size)[1] + float(rng.uniform(-0.4, 0.4)) * size[1]
         region = str(_choose(rng, [(1, "full"), (1, "cut_back"), (0.5, "cut_top")]))
         g = _behind_back_wall(
             rng,
@@ -1682,7 +1685,7 @@ def _room(
         rotation,
         f,
         f,
-        ((size[0] - 1) / 2, (size[1] - 1) / 2),
+        tuple(picture_centre(size)),
         _fold_safe_dist(rng, float(rng.uniform(-0.08, 0.02))),
     )
     style = replace(style, **_video_chain(rng, "phone"))

@@ -565,13 +565,10 @@ def judge_camera(
     figures["floor_share"] = float(search.floor_shares(fit.genome, model, image_size)[0])
     figures["camera_in_play_volume"] = float(search.in_play_volume(fit.genome, model)[0])
     figures["pixel_aspect"] = float(fit.genome[camera.GENE["f_v"]] / fit.genome[camera.GENE["f_u"]])
-    figures["principal_point_offset_share"] = float(
-        np.hypot(
-            fit.genome[camera.GENE["c_u"]] - (image_size[0] - 1) / 2.0,
-            fit.genome[camera.GENE["c_v"]] - (image_size[1] - 1) / 2.0,
-        )
-        / image_size[0]
+    offset = fit.genome[[camera.GENE["c_u"], camera.GENE["c_v"]]] - camera.picture_centre(
+        image_size
     )
+    figures["principal_point_offset_share"] = float(np.hypot(*offset) / image_size[0])
     figures.update({f"search_{k}": v for k, v in search_info.items()})
     return quality.verdict(figures), uncertainty
 

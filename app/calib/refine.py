@@ -210,14 +210,11 @@ def intrinsic_extensions(genome: np.ndarray, image_size: tuple[int, int]) -> tup
     hypothesis for an anamorphic frame or a cropped photo starts with them, and a fit from it
     must move (and pay for) them like any other parameter instead of keeping them frozen."""
     g = np.asarray(genome, dtype=np.float64)
-    width, height = image_size
     out: list[str] = []
     if abs(g[GENE["f_v"]] / g[GENE["f_u"]] - 1.0) > 1e-9:
         out.append("aspect")
-    if (
-        abs(g[GENE["c_u"]] - (width - 1) / 2.0) > 1e-6
-        or abs(g[GENE["c_v"]] - (height - 1) / 2.0) > 1e-6
-    ):
+    centre = camera.picture_centre(image_size)
+    if abs(g[GENE["c_u"]] - centre[0]) > 1e-6 or abs(g[GENE["c_v"]] - centre[1]) > 1e-6:
         out.append("centre")
     return tuple(out)
 

@@ -884,8 +884,9 @@ def genomes_from_poses(
     width, height = image_size
     genomes = np.zeros((n, camera.N_GENES))
     genomes[:, 0], genomes[:, 1] = k[:, 0], k[:, 1]
-    genomes[:, 2] = (width - 1) / 2.0 + k[:, 2]
-    genomes[:, 3] = (height - 1) / 2.0 + k[:, 3]
+    centre = camera.picture_centre(image_size)
+    genomes[:, 2] = centre[0] + k[:, 2]
+    genomes[:, 3] = centre[1] + k[:, 3]
     genomes[:, 7:10] = camera.angles_from_rotations(rotations @ camera.PAPER_FROM_COURT_R.T)
     genomes[:, 4:7] = translations + rotations @ camera.PAPER_ORIGIN_COURT_M
     if undistortion is not None and undistortion.lam != 0.0:
@@ -946,7 +947,7 @@ def floor_hypotheses(
     across_values, along_values = floor_line_values(model)
     homog = lines.homogeneous()
     strength = lines.strength()
-    centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    centre = camera.picture_centre(image_size)
     to_centred = np.array([[1.0, 0.0, -centre[0]], [0.0, 1.0, -centre[1]], [0.0, 0.0, 1.0]])
     court_centre = np.array([model.spec.width_m / 2.0, model.spec.length_m / 2.0])
     calls = []
@@ -1215,7 +1216,7 @@ def front_wall_hypotheses(
     and a camera. Views from behind the back wall show the front wall best of all; its floor
     lines may be faint, short or hidden by players."""
     width, height = image_size
-    centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    centre = camera.picture_centre(image_size)
     z_values, x_values = front_wall_values(model)
     homog = lines.homogeneous()
     strength = lines.strength()
@@ -1813,7 +1814,7 @@ def look_at_genomes(
     width, height = image_size
     genomes = np.zeros((len(centres_m), camera.N_GENES))
     genomes[:, 0] = genomes[:, 1] = focal_px
-    genomes[:, 2], genomes[:, 3] = (width - 1) / 2.0, (height - 1) / 2.0
+    genomes[:, 2], genomes[:, 3] = camera.picture_centre(image_size)
     # the genome's pose is in the paper frame: the inverse of camera.court_extrinsics
     r_paper = rotations @ camera.PAPER_FROM_COURT_R.T
     genomes[:, 7:10] = [camera.angles_from_rotation(r) for r in r_paper]

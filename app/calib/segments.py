@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from app.calib import camera
 from app.calib.lines import LineEvidence
 
 LINK_MAX_ANGLE_RAD = np.deg2rad(8.0)
@@ -198,7 +199,7 @@ def _line_fit_rms(points: np.ndarray) -> float:
 def estimate_undistortion(chains: Chains, image_size: tuple[int, int]) -> Undistortion:
     """The division-model lambda that straightens the long chains best (0 if none is long)."""
     width, height = image_size
-    centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    centre = camera.picture_centre(image_size)
     radius = 0.5 * float(np.hypot(width, height))
     min_len = DISTORTION_CHAIN_FRACTION * width
     voters = []
