@@ -154,8 +154,9 @@ def claim(
     """Atomically take a claimable job (queued and due, or running with an expired lease): the
     oldest of the tenant with the fewest running jobs, so that one tenant's pile of uploads does
     not hold back another tenant's single one."""
+    given = now
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
-        now = _now_under_lock(session, now)
+        now = _now_under_lock(session, given)
         # A job whose worker died on its last attempt will never be retried: fail it with a reason.
         worker_lost = session.scalars(
             update(Job)
@@ -177,6 +178,10 @@ def claim(
             .execution_options(synchronize_session=False)
         ).all()
         _close_lost_attempts(session, list(worker_lost), now)
+        # On PostgreSQL that statement waits for the row locks of the jobs it fails (another
+        # worker's claim or heartbeat holds them for a moment): the lease starts now, not when
+        # the transaction began, or it would arrive already shortened by the wait.
+        now = given or utcnow()
         candidate = (
             select(Job.id)
             .where(or_(_due(now), _expired(now)), Job.attempts < Job.max_attempts)

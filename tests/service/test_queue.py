@@ -123,6 +123,38 @@ def test_expired_lease_is_reclaimed_and_the_old_worker_is_fenced_off(engine) -> 
     assert (row.status, row.attempts, row.progress, row.worker_id) == ("succeeded", 2, 1.0, "new")
 
 
+def test_a_claim_that_waited_for_a_lock_still_gets_its_whole_lease(engine) -> None:
+    """The claim first fails jobs whose last attempt's worker was lost; on PostgreSQL that waits
+    for their row locks (here another transaction holds one for 1.5 s). The job it then claims
+    must hold a lease counted from after the wait, not from the transaction's start."""
+    wait_s, lease_s = 1.5, 60.0
+    _, [lost_id, queued_id] = add_jobs(engine, 2, max_attempts=1)
+    long_ago = utcnow() - timedelta(hours=1)
+    claimed = queue.claim(engine, "dead", lease_s=10, now=long_ago)
+    assert claimed is not None and claimed.id == lost_id  # its lease ran out long ago
+    locked, released_at = threading.Event(), []
+
+    def hold_the_lost_jobs_row() -> None:
+        with engine.begin() as connection:
+            connection.execute(
+                text("UPDATE jobs SET updated_at = updated_at WHERE id = :id"), {"id": lost_id}
+            )
+            locked.set()
+            threading.Event().wait(wait_s)
+            released_at.append(utcnow())
+
+    holder = threading.Thread(target=hold_the_lost_jobs_row)
+    holder.start()
+    assert locked.wait(10)
+    job = queue.claim(engine, "live", lease_s=lease_s)
+    holder.join()
+    assert job is not None and job.id == queued_id
+    lease_expires_at = job_row(engine, queued_id).lease_expires_at
+    assert lease_expires_at is not None
+    assert lease_expires_at >= released_at[0] + timedelta(seconds=lease_s - 0.25)
+    assert job_row(engine, lost_id).error_code == "worker_lost"
+
+
 def test_heartbeat_extends_the_lease_and_writes_progress(engine) -> None:
     _, [job_id] = add_jobs(engine, 1)
     job = queue.claim(engine, "w", lease_s=5)
