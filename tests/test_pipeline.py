@@ -288,3 +288,21 @@ def test_overlay_draws_the_court_on_a_copy(truth, photo):
     grey = cv2.cvtColor(photo, cv2.COLOR_BGR2GRAY)
     assert pipeline.draw_overlay(grey, truth).shape == photo.shape
     assert not np.array_equal(overlay, photo)
+
+
+def test_an_anamorphic_frame_refused_with_square_pixels_is_found_by_the_second_search() -> None:
+    """bench.synthetic's anamorphic_cropped 1008 (1280 x 720 shown from a 4:3 picture, f_v / f_u =
+    0.75, seen from behind the back wall): square pixels explain its floor but not its walls, and
+    the usual search is refused; the search with the anamorphic aspects finds it."""
+    from bench.synthetic import FOUND_FLOOR_CM, FOUND_LINES_PX, camera_errors
+
+    case = cases.make_case("anamorphic_cropped", 1008)
+    size = (case.image.shape[1], case.image.shape[0])
+    result = pipeline.calibrate(case.image, spec=case.spec)
+    assert "square_pixel_pass" in result.timings_s  # the first search was refused
+    assert result.timings_s["total"] > result.timings_s["square_pixel_pass"]
+    aspect = result.genome[camera.GENE["f_v"]] / result.genome[camera.GENE["f_u"]]
+    assert aspect == pytest.approx(0.75, abs=0.01)
+    floor_cm, lines_px = camera_errors(case.genome, result.genome, case.spec, size)
+    assert floor_cm <= FOUND_FLOOR_CM and lines_px <= FOUND_LINES_PX, (floor_cm, lines_px)
+    assert "aspect" in result.camera_model

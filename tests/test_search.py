@@ -206,6 +206,38 @@ def test_an_anamorphic_frame_is_found_with_the_vertical():
     assert errors[anamorphic].min() < 0.5
 
 
+def _worst_node_error_px(truth: np.ndarray, genomes: np.ndarray) -> np.ndarray:
+    """Largest pixel error over the court's nodes (floor and walls) in front of the camera."""
+    nodes = court.court_model().nodes
+    true_px = camera.project_visible(truth, nodes)
+    seen = np.all(np.isfinite(true_px), axis=1)
+    est_px, _ = camera.project_points(camera.as_population(genomes), nodes[seen])
+    return np.max(np.linalg.norm(est_px - true_px[seen][None], axis=2), axis=1)
+
+
+def test_an_anamorphic_frame_facing_down_the_court_is_found_by_its_aspect_variants():
+    truth = _pinhole_target()
+    truth[camera.GENE["f_v"]] = 0.75 * truth[camera.GENE["f_u"]]
+    image_lines = _image_lines(truth, FLOOR_LINES)  # no wall line: no vertical to lean on
+    model = court.court_model()
+    square = search.floor_hypotheses(
+        image_lines, search.vanishing_groups(image_lines), model, SIZE, None
+    )
+    # square pixels explain the floor, but their walls miss by tens of pixels
+    assert _floor_error_px(truth, square).min() < 1.0
+    assert _worst_node_error_px(truth, square).min() > 20.0
+    variants, rows = search.aspect_variants(square, model, SIZE)
+    assert np.all((rows >= 0) & (rows < len(square)))
+    # the same floors under other aspects: the frame's own camera is among them
+    errors = _worst_node_error_px(truth, variants)
+    best = int(np.argmin(errors))
+    assert errors[best] < 2.0
+    assert variants[best, 1] / variants[best, 0] == pytest.approx(0.75, abs=0.01)
+    floor_px = camera.floor_to_pixel(variants[best], floor_grid()[:, :2])
+    square_px = camera.floor_to_pixel(square[rows[best]], floor_grid()[:, :2])
+    assert np.nanmax(np.linalg.norm(floor_px - square_px, axis=1)) < 2.0
+
+
 def test_could_be_orthogonal_and_vertical():
     centre = np.array([639.5, 359.5])
     horizontal_at_infinity = np.array([1.0, 0.0, 0.0])

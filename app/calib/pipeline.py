@@ -67,7 +67,14 @@ POLISHED_FROM_GRID = 6
 POLISH_TAUS_AT_1920 = (24.0, 8.0)
 POLISH_EVALUATIONS = 120
 REFINED_CANDIDATES = 8
-HINT = 2  # source index of the start camera given as a hint
+# source indices of the hypotheses: from image lines, the placement grid, the start camera given
+# as a hint, and the line hypotheses under other pixel aspects
+LINES, GRID, HINT, ASPECT = 0, 1, 2, 3
+SOURCE_LABELS = ("lines", "grid", "start", "aspect")
+# The aspect variants are many near-copies of the line hypotheses' floors; they have budgets of
+# their own so that they cannot crowd the square-pixel hypotheses out of verification or polish.
+VERIFIED_ASPECT_VARIANTS = 300
+POLISHED_ASPECT_VARIANTS = 6
 # refinement truncations (px at 1920 px wide; never below 1.5 px)
 REFINE_TAUS_AT_1920 = (16.0, 5.0, 2.0)
 # Another court spec is reported when the lines that tell it apart from the court's own lie on
@@ -227,8 +234,10 @@ def search_cameras(
     start_genome: np.ndarray | None,
     verify: search.VerifySamples,
     trace: Callable[[str, np.ndarray], None] | None = None,
+    anamorphic: bool = False,
 ) -> SearchOutcome:
-    """Hypotheses from the image's lines, typical placements and the start camera: ranked on
+    """Hypotheses from the image's lines, typical placements and the start camera (and, with
+    `anamorphic`, the line hypotheses under the anamorphic formats' pixel aspects): ranked on
     the evidence with a wide tolerance, the best distinct ones polished (a pinhole + k1 fit from
     a wide to a narrower truncation), ranked again with a tight tolerance. `trace(stage,
     cameras)` sees the cameras kept after each stage (for diagnosis)."""
@@ -261,10 +270,8 @@ def search_cameras(
     from_lines = np.concatenate(line_parts)
     grid = search.candidate_starts(image_size, model)
     parts = [from_lines, grid]
-    labels = ["lines", "grid"]  # the hint, if any, is source HINT
     if start_genome is not None:
         parts.append(start_genome[None, :])
-        labels.append("start")
     sources = np.concatenate([np.full(len(p), i) for i, p in enumerate(parts)])
     genomes = np.concatenate(parts)
     traced("hypotheses", genomes)
@@ -276,6 +283,13 @@ def search_cameras(
         keep = np.union1d(keep, np.flatnonzero(sources == HINT))  # the hint always goes on
         genomes, sources = genomes[keep], sources[keep]
         traced("floor pass", genomes)
+    if anamorphic:
+        # the floor hypotheses again under other pixel aspects: their floors are the same, so
+        # only the ranking with the walls below can tell them apart
+        variants, _ = search.aspect_variants(genomes[sources == LINES], model, image_size)
+        genomes = np.concatenate([genomes, variants])
+        sources = np.concatenate([sources, np.full(len(variants), ASPECT, dtype=sources.dtype)])
+        traced("aspect variants", genomes)
     # Ranked at two tolerances: the wide one keeps hypotheses a few pixels off (four lines
     # pin a homography only near them); the tight one keeps those that are right where a busy
     # picture puts some line within the wide tolerance of nearly every wrong camera.
@@ -286,43 +300,47 @@ def search_cameras(
     implausible = search.floor_shares(genomes, model, image_size) < search.MIN_FLOOR_SHARE
     implausible |= search.in_play_volume(genomes, model)
     coarse[implausible] = coarse_tight[implausible] = -np.inf
-    if len(genomes) > VERIFIED_HYPOTHESES + VERIFIED_AT_TIGHT_TOLERANCE:
+    variant = sources == ASPECT
+    square = np.flatnonzero(~variant)
+    if len(square) > VERIFIED_HYPOTHESES + VERIFIED_AT_TIGHT_TOLERANCE:
         keep = np.union1d(
-            np.argpartition(-coarse, VERIFIED_HYPOTHESES)[:VERIFIED_HYPOTHESES],
-            np.argpartition(-coarse_tight, VERIFIED_AT_TIGHT_TOLERANCE)[
-                :VERIFIED_AT_TIGHT_TOLERANCE
-            ],
+            square[_best_rows(coarse[square], VERIFIED_HYPOTHESES)],
+            square[_best_rows(coarse_tight[square], VERIFIED_AT_TIGHT_TOLERANCE)],
         )
-        keep = np.union1d(keep, np.flatnonzero(sources == HINT))  # the hint always goes on
-        genomes, sources = genomes[keep], sources[keep]
+    else:
+        keep = square
+    variants_kept = np.flatnonzero(variant & np.isfinite(coarse))
+    keep = np.union1d(
+        keep, variants_kept[_best_rows(coarse[variants_kept], VERIFIED_ASPECT_VARIANTS)]
+    )
+    keep = np.union1d(keep, np.flatnonzero(sources == HINT))  # the hint always goes on
+    genomes, sources = genomes[keep], sources[keep]
     traced("coarse", genomes)
     _, _, scores = search.edge_support(genomes, verify, maps, rank_tolerance)
     _, _, tight_scores = search.edge_support(genomes, verify, maps, tight_tolerance)
-    # the line hypotheses (and the hint) at both tolerances, and a few of the placements as a
-    # fallback
-    from_grid = sources == 1
-    chosen = list(
-        search.distinct_best(
-            genomes, np.where(~from_grid, scores, -np.inf), model, image_size, POLISHED_FROM_LINES
-        )
-    )
+
+    def best_of(rows: np.ndarray, values: np.ndarray, count: int) -> list[int]:
+        masked = np.where(rows, values, -np.inf)
+        return [int(i) for i in search.distinct_best(genomes, masked, model, image_size, count)]
+
+    # the line hypotheses (and the hint) at both tolerances, a few of the placements as a
+    # fallback, and a few of the aspect variants if any
+    from_lines = (sources == LINES) | (sources == HINT)
+    chosen = best_of(from_lines, scores, POLISHED_FROM_LINES)
+    for group, values, count in (
+        (from_lines, tight_scores, POLISHED_AT_TIGHT_TOLERANCE),
+        (sources == GRID, scores, POLISHED_FROM_GRID),
+    ):
+        chosen += [i for i in best_of(group, values, count) if i not in chosen]
+    # (distinct_best fills up from outside the group when the group is small: the aspect
+    # variants, absent from the first search, must not bring other hypotheses in)
+    variant = sources == ASPECT
     chosen += [
-        int(i)
-        for i in search.distinct_best(
-            genomes,
-            np.where(~from_grid, tight_scores, -np.inf),
-            model,
-            image_size,
-            POLISHED_AT_TIGHT_TOLERANCE,
-        )
-        if int(i) not in chosen
+        i
+        for i in best_of(variant, scores, POLISHED_ASPECT_VARIANTS)
+        if variant[i] and i not in chosen
     ]
-    chosen += list(
-        search.distinct_best(
-            genomes, np.where(from_grid, scores, -np.inf), model, image_size, POLISHED_FROM_GRID
-        )
-    )
-    chosen = [int(i) for i in chosen if np.isfinite(scores[i]) and np.isfinite(tight_scores[i])]
+    chosen = [i for i in chosen if np.isfinite(scores[i]) and np.isfinite(tight_scores[i])]
     # a start camera given by the user is always polished: it is a hint worth the look
     chosen += [int(i) for i in np.flatnonzero(sources == HINT) if int(i) not in chosen]
     traced("chosen for polishing", genomes[chosen])
@@ -362,11 +380,18 @@ def search_cameras(
     }
     return SearchOutcome(
         candidates=polished[best],
-        sources=[labels[int(sources[chosen[i]])] for i in best],
+        sources=[SOURCE_LABELS[int(sources[chosen[i]])] for i in best],
         scores=polished_scores[best],
         info=info,
         convergence=convergence,
     )
+
+
+def _best_rows(values: np.ndarray, count: int) -> np.ndarray:
+    """Indices of the `count` largest values (all of them if there are no more)."""
+    if len(values) <= count:
+        return np.arange(len(values))
+    return np.argpartition(-values, count)[:count]
 
 
 def refine_taus(image_width: int) -> tuple[float, ...]:
@@ -597,6 +622,7 @@ def calibrate(
     spec: str = "wsf",
     moving_mask: np.ndarray | None = None,
     progress: ProgressFn | None = None,
+    anamorphic: bool = False,
 ) -> CalibrationResult:
     """Fit the camera to one image (BGR/BGRA/grey photo, or an edge image).
 
@@ -604,6 +630,11 @@ def calibrate(
     paper's GA bundles to run between search and refinement (None: no GA); `max_generations`
     and `time_budget_s` bound it. Raises ValueError for bad input and CourtNotFound when the best
     camera is not a court.
+
+    Anamorphic frames: when no court is found with the usual hypotheses (and no GA), the search
+    runs again with their aspect variants as well (`anamorphic`; see search.ANAMORPHIC_ASPECTS).
+    Only then: with them from the start, a zoomed view, which shows few wall lines, can be
+    explained better by a wrong camera under some aspect than by its own.
     """
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
@@ -638,7 +669,7 @@ def calibrate(
     t0 = time.perf_counter()
     report("optimising", 0.0, {})
     verify = search.verify_samples(model)
-    found = search_cameras(ev, maps, model, size, hint, verify)
+    found = search_cameras(ev, maps, model, size, hint, verify, anamorphic=anamorphic)
     timings["search"] = time.perf_counter() - t0
     if len(found.candidates) == 0:
         raise CourtNotFound("court not found: no camera fits the lines in the picture", found.info)
@@ -722,6 +753,18 @@ def calibrate(
     report("refining", 0.9, {})
     if judged.label == "not_a_court":
         timings["total"] = time.perf_counter() - t_start
+        if bundle_config is None and not anamorphic:
+            try:
+                # progress is not reported again: it would run backwards
+                second = calibrate(
+                    arr, start_genome=hint, spec=spec, moving_mask=moving_mask, anamorphic=True
+                )
+            except CourtNotFound:
+                pass
+            else:
+                second.timings_s["square_pixel_pass"] = timings["total"]
+                second.timings_s["total"] += timings["total"]
+                return second
         raise CourtNotFound(
             "court not found: " + "; ".join(judged.reasons),
             judged.figures,
