@@ -309,7 +309,22 @@ function setBusy(busy) {
   $("drop").classList.toggle("busy", busy);
 }
 
-function uploadWithProgress(courtId, files) {
+// the upload is sent again after a 503 (the service stored nothing: its database was busy),
+// as every other request is; the files are still in hand, so it costs only the wait
+async function uploadWithProgress(courtId, files) {
+  for (let attempt = 0; ; attempt += 1) {
+    try {
+      return await sendUpload(courtId, files);
+    } catch (e) {
+      if (!(e instanceof ApiError) || e.status !== 503 || attempt >= UNAVAILABLE_RETRIES) throw e;
+      const waitS = Math.min(e.retryAfterS || 2, 10);
+      $("upload-label").textContent = `The service is busy; sending again in ${waitS} s`;
+      await new Promise((resolve) => setTimeout(resolve, 1000 * waitS));
+    }
+  }
+}
+
+function sendUpload(courtId, files) {
   return new Promise((resolve, reject) => {
     const form = new FormData();
     for (const f of files) form.append("files", f, f.name);
@@ -328,7 +343,11 @@ function uploadWithProgress(courtId, files) {
       let body = null;
       try { body = JSON.parse(xhr.responseText); } catch (e) { /* not JSON */ }
       if (xhr.status === 202 && body) resolve(body);
-      else reject(new ApiError(xhr.status, body?.error?.code || "http_error", body?.error?.message || `${xhr.status} ${xhr.statusText}`));
+      else {
+        const error = new ApiError(xhr.status, body?.error?.code || "http_error", body?.error?.message || `${xhr.status} ${xhr.statusText}`);
+        error.retryAfterS = Number(xhr.getResponseHeader("Retry-After")) || null;
+        reject(error);
+      }
     };
     xhr.send(form);
   });
