@@ -734,6 +734,7 @@ def calibrate(
     polished = refine.best_of_perturbed_starts(fit, samples, maps, refine_taus(width)[1:])
     plain = fit
     fit = refine.select_model(polished, samples, maps, width)
+    fit = refine.refit_from_wide(fit, samples, maps, refine_taus(width))
     report("refining", 0.7, {})
     judged, uncertainty = judge_camera(fit, samples, verify, maps, model, size, found.info)
     if polished is not plain:
@@ -744,6 +745,7 @@ def calibrate(
         # can slip off within the verdict's tight tolerance (seeds 3000+: a zoomed view refused
         # with them). Where either camera is refused, the one without them stands.
         plain = refine.select_model(plain, samples, maps, width)
+        plain = refine.refit_from_wide(plain, samples, maps, refine_taus(width))
         plain_judged, plain_uncertainty = judge_camera(
             plain, samples, verify, maps, model, size, found.info
         )

@@ -304,6 +304,25 @@ def refine_coarse_to_fine(
     return fit
 
 
+# `refit_from_wide`: the widest truncation of its schedule, as a multiple of the refinement's
+# widest. Lines at the picture's edge, where a lens's second radial term matters and the middle
+# of the picture does not pin it, were 30-70 px off on bench.synthetic's club 5000.
+WIDE_REFIT_FACTOR = 3.0
+
+
+def refit_from_wide(
+    fit: Fit, samples: FitSamples, maps: EvidenceMaps, taus_px: tuple[float, ...]
+) -> Fit:
+    """`fit` refitted (its model) from a truncation WIDE_REFIT_FACTOR times the widest of
+    `taus_px` down through the others to `fit`'s own, if that lowers its cost there: with what
+    lies off the court set aside, lines the fit left far from their evidence (at the picture's
+    edge, beyond the tight truncations' reach) can be pulled in without locking onto clutter."""
+    wider = [tau for tau in taus_px if tau > fit.tau_px]
+    schedule = (WIDE_REFIT_FACTOR * max(taus_px), *wider, fit.tau_px)
+    wide = refine_coarse_to_fine(fit.genome, samples, maps, schedule, fit.model)
+    return wide if wide.cost < fit.cost else fit
+
+
 # How far the perturbed starts of `best_of_perturbed_starts` are thrown (one standard deviation):
 # a few times the final truncation, i.e. as far off as the stuck cameras seen on bench.synthetic
 # (court lines 5-8 px RMS off with the floor within 2-4 cm). At f = 1000 px and 8 m, 0.4 degrees
