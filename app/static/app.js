@@ -91,6 +91,13 @@ async function busyWith(promise) {
 
 const UNAVAILABLE_RETRIES = 3;
 
+// how long to wait before sending again a request answered 503: the service's Retry-After
+// (a header value), within 10 s
+async function waitBeforeRetry(retryAfter) {
+  const waitS = Math.min(Number(retryAfter) || 2, 10);
+  await new Promise((resolve) => setTimeout(resolve, 1000 * waitS));
+}
+
 function api(path, options = {}) {
   return busyWith(request(path, options));
 }
@@ -112,8 +119,7 @@ async function request(path, options) {
     // 503 means the service did nothing (its database was busy or down for a moment): the
     // same request is safe to send again after the wait the service asks for
     if (response.status !== 503 || attempt >= UNAVAILABLE_RETRIES) break;
-    const waitS = Math.min(Number(response.headers.get("Retry-After")) || 2, 10);
-    await new Promise((resolve) => setTimeout(resolve, 1000 * waitS));
+    await waitBeforeRetry(response.headers.get("Retry-After"));
   }
   if (!response.ok) throw await errorOf(response);
   const type = response.headers.get("content-type") || "";
@@ -317,9 +323,8 @@ async function uploadWithProgress(courtId, files) {
       return await sendUpload(courtId, files);
     } catch (e) {
       if (!(e instanceof ApiError) || e.status !== 503 || attempt >= UNAVAILABLE_RETRIES) throw e;
-      const waitS = Math.min(e.retryAfterS || 2, 10);
-      $("upload-label").textContent = `The service is busy; sending again in ${waitS} s`;
-      await new Promise((resolve) => setTimeout(resolve, 1000 * waitS));
+      $("upload-label").textContent = "The service is busy for a moment; sending again";
+      await waitBeforeRetry(e.retryAfter);
     }
   }
 }
@@ -345,7 +350,7 @@ function sendUpload(courtId, files) {
       if (xhr.status === 202 && body) resolve(body);
       else {
         const error = new ApiError(xhr.status, body?.error?.code || "http_error", body?.error?.message || `${xhr.status} ${xhr.statusText}`);
-        error.retryAfterS = Number(xhr.getResponseHeader("Retry-After")) || null;
+        error.retryAfter = xhr.getResponseHeader("Retry-After");
         reject(error);
       }
     };
