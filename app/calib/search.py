@@ -881,7 +881,6 @@ def genomes_from_poses(
     if k.ndim == 1:
         k = np.column_stack([k, k, np.zeros_like(k), np.zeros_like(k)])
     n = len(k)
-    width, height = image_size
     genomes = np.zeros((n, camera.N_GENES))
     genomes[:, 0], genomes[:, 1] = k[:, 0], k[:, 1]
     centre = camera.picture_centre(image_size)
@@ -1895,7 +1894,6 @@ def look_at_genomes(
     x_axis = cos_r * right + sin_r * up_in_image
     y_axis = -sin_r * right + cos_r * up_in_image
     rotations = np.stack([x_axis, y_axis, forward], axis=1)
-    width, height = image_size
     genomes = np.zeros((len(centres_m), camera.N_GENES))
     genomes[:, 0] = genomes[:, 1] = focal_px
     genomes[:, 2], genomes[:, 3] = camera.picture_centre(image_size)
