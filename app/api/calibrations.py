@@ -6,17 +6,18 @@ from typing import Any
 
 from fastapi import APIRouter, Request
 from fastapi.responses import FileResponse, JSONResponse
+from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session
 from starlette.concurrency import run_in_threadpool
 
 from app import media
 from app.api import uploads
-from app.api.deps import SessionDep, StateDep, TenantDep
+from app.api.deps import AppState, SessionDep, StateDep, TenantDep
 from app.api.errors import ApiError
 from app.api.routing import ApiRoute
 from app.api.serialize import calibration_out
 from app.db import repo
-from app.db.models import Calibration, Court, new_id
+from app.db.models import Calibration, Court, Job, new_id
 from app.media import probe
 from app.schemas import CalibrationOut, ErrorResponse, JobAccepted
 from app.settings import Settings
@@ -91,6 +92,7 @@ async def upload_calibration(
     # 404 or 429 before reading a byte of the body
     await run_in_threadpool(owned_court_with_room_in_the_queue)
     job_id = new_id()
+    commit_sent = False
     store = media.media_store(settings)
     target = store.create_job_dir(job_id)
     try:
@@ -115,10 +117,35 @@ async def upload_calibration(
                     max_attempts=settings.max_attempts,
                 )
 
+        commit_sent = True
         await run_in_threadpool(commit_job)
+    except OperationalError:
+        # The connection can drop after the database committed and before it said so: then
+        # the job exists, and removing its media would lose an accepted upload (and the
+        # client's retry of the 503 would queue it twice). Keep the media unless the job is
+        # known not to exist; a folder without a job is swept later (orphan_media_grace_s).
+        stored = await run_in_threadpool(_job_stored, state, job_id) if commit_sent else False
+        if stored is True:
+            return _accepted(job_id)
+        if stored is False:
+            store.remove_job_dir(job_id)
+        raise
     except BaseException:
         store.remove_job_dir(job_id)
         raise
+    return _accepted(job_id)
+
+
+def _job_stored(state: AppState, job_id: str) -> bool | None:
+    """Whether the job's row exists; None when the database cannot say now."""
+    try:
+        with state.sessions() as session:
+            return session.get(Job, job_id) is not None
+    except OperationalError:
+        return None
+
+
+def _accepted(job_id: str) -> JSONResponse:
     return JSONResponse(
         {"job_id": job_id, "status": "queued"},
         status_code=202,

@@ -11,6 +11,7 @@ import httpx
 import numpy as np
 import pytest
 from sqlalchemy import select
+from sqlalchemy.orm import Session
 
 from app.db.models import Job
 from app.db.session import make_engine, make_sessionmaker
@@ -390,3 +391,54 @@ def test_size_limit_applies_while_streaming_without_content_length(tmp_path: Pat
         assert_error(response, 413, "upload_too_large")
     assert stored_job_dirs(settings) == []
     assert jobs_in_db(settings) == []
+
+
+@pytest.mark.parametrize("committed", [True, False])
+def test_a_connection_lost_at_the_commit_keeps_an_accepted_upload(
+    settings: Settings, auth: dict[str, str], committed: bool
+) -> None:
+    """The database connection drops as the job is committed. If the commit went through (only
+    its acknowledgement was lost), the job exists: the upload is answered 202 with it and its
+    media stay. If it did not, the answer is 503 (retry) and nothing is kept."""
+    from sqlalchemy import event
+    from sqlalchemy.exc import OperationalError
+
+    app = create_app(settings)
+    sessions = app.state.squashcal.sessions
+    pending = {"job": False}
+
+    def connection_lost() -> OperationalError:
+        return OperationalError("COMMIT", {}, Exception("server closed the connection"))
+
+    def after_flush(session: Session, flush_context: object) -> None:
+        # (the identity map holds objects weakly: by the commit the new job may have left it)
+        if any(isinstance(obj, Job) for obj in session.new):
+            session.info["new_job"] = True
+
+    def before_commit(session: Session) -> None:
+        if session.info.pop("new_job", False):
+            if not committed:
+                raise connection_lost()
+            pending["job"] = True
+
+    def after_commit(session: Session) -> None:
+        if pending["job"]:
+            pending["job"] = False
+            raise connection_lost()
+
+    event.listen(sessions, "after_flush", after_flush)
+    event.listen(sessions, "before_commit", before_commit)
+    event.listen(sessions, "after_commit", after_commit)
+    with api_client(app) as client:
+        court_id = make_court(client, auth)
+        response = upload(client, auth, court_id, files(png_bytes(seed=4)))
+    jobs = jobs_in_db(settings)
+    if committed:
+        assert response.status_code == 202, response.text
+        [job] = jobs
+        assert response.json() == {"job_id": job.id, "status": "queued"}
+        assert [d.name for d in stored_job_dirs(settings)] == [job.id]
+    else:
+        assert_error(response, 503, "database_unavailable")
+        assert jobs == []
+        assert stored_job_dirs(settings) == []
