@@ -306,3 +306,19 @@ def test_an_anamorphic_frame_refused_with_square_pixels_is_found_by_the_second_s
     floor_cm, lines_px = camera_errors(case.genome, result.genome, case.spec, size)
     assert floor_cm <= FOUND_FLOOR_CM and lines_px <= FOUND_LINES_PX, (floor_cm, lines_px)
     assert "aspect" in result.camera_model
+
+
+def test_a_strong_lens_the_plumb_line_estimate_misjudges_is_found_by_the_second_search() -> None:
+    """bench.synthetic's wide_angle 5008 (1920 x 1080, k1 = -0.18, k2 = 0.015): the plumb-line
+    estimate of the lens (division model, lambda -0.16) is weaker than the lens (about -0.27), and
+    the lines it straightens give no hypothesis near the court: the first search is refused (3 m
+    off); the second straightens them with a stronger multiple of the estimate too and finds it."""
+    from bench.synthetic import FOUND_FLOOR_CM, FOUND_LINES_PX, camera_errors
+
+    case = cases.make_case("wide_angle", 5008)
+    size = (case.image.shape[1], case.image.shape[0])
+    assert max(pipeline.STRONG_LENS_FACTORS_SECOND_SEARCH) > 1.0
+    result = pipeline.calibrate(case.image, spec=case.spec)
+    assert "square_pixel_pass" in result.timings_s  # the first search was refused
+    floor_cm, lines_px = camera_errors(case.genome, result.genome, case.spec, size)
+    assert floor_cm <= FOUND_FLOOR_CM and lines_px <= FOUND_LINES_PX, (floor_cm, lines_px)

@@ -57,8 +57,12 @@ DEFAULT_MAX_GENERATIONS = 3000
 # the polish's truncations (px at 1920 px wide) and budget, and how many go on to refinement.
 FLOOR_PASS_HYPOTHESES = 15000
 VERIFIED_HYPOTHESES = 2000
-# |lambda| (division model, radius in half-diagonals) above which a weaker lens is tried too
+# |lambda| (division model, radius in half-diagonals) above which other lenses are tried too,
+# as these multiples of the estimate: a weaker one in every search, more in the second search
+# (see `search_cameras`)
 STRONG_LENS_LAMBDA = 0.08
+STRONG_LENS_FACTORS = (0.5,)
+STRONG_LENS_FACTORS_SECOND_SEARCH = (0.5, 0.75, 1.5)
 POLISHED_FROM_LINES = 24
 # ... and ranked at the tight tolerance (see `search_cameras`)
 VERIFIED_AT_TIGHT_TOLERANCE = 500
@@ -234,10 +238,11 @@ def search_cameras(
     start_genome: np.ndarray | None,
     verify: search.VerifySamples,
     trace: Callable[[str, np.ndarray], None] | None = None,
-    anamorphic: bool = False,
+    second_search: bool = False,
 ) -> SearchOutcome:
-    """Hypotheses from the image's lines, typical placements and the start camera (and, with
-    `anamorphic`, the line hypotheses under the anamorphic formats' pixel aspects): ranked on
+    """Hypotheses from the image's lines, typical placements and the start camera (and, in the
+    `second_search` after a refusal, the line hypotheses under the anamorphic formats' pixel
+    aspects and from lines straightened with more lenses): ranked on
     the evidence with a wide tolerance, the best distinct ones polished (a pinhole + k1 fit from
     a wide to a narrower truncation), ranked again with a tight tolerance. `trace(stage,
     cameras)` sees the cameras kept after each stage (for diagnosis)."""
@@ -252,10 +257,17 @@ def search_cameras(
     min_length = max(10.0, 30.0 * width / 1920.0)
     # The plumb-line estimate leans on the long lines at the picture's edge, where a real lens
     # departs most from the one-term model, and overshoots the centre's distortion there: a
-    # weaker lens is tried as well.
+    # weaker lens is tried as well. It can also undershoot (a few long lines near the centre
+    # outvote them): on bench.synthetic's wide_angle 5008 it said -0.16 for a lens nearest
+    # -0.27, and no hypothesis came within 25 px of the court; from lines straightened with
+    # -0.24 to -0.27, hypotheses 1.5-7 px off. The second search (after a refusal) tries a
+    # stronger lens too. Not the first: more lenses there give more near-copies of the right
+    # camera with other lenses, and on seeds 1000+ two wide-angle views found with the
+    # estimate's lens ended with another's, their picture's corners 4-5 px off.
+    factors = STRONG_LENS_FACTORS_SECOND_SEARCH if second_search else STRONG_LENS_FACTORS
     lens_candidates = [undistortion.lam]
     if abs(undistortion.lam) > STRONG_LENS_LAMBDA:
-        lens_candidates.append(0.5 * undistortion.lam)
+        lens_candidates += [factor * undistortion.lam for factor in factors]
     line_parts = []
     n_lines = n_groups = 0
     for lam in lens_candidates:
@@ -283,7 +295,7 @@ def search_cameras(
         keep = np.union1d(keep, np.flatnonzero(sources == HINT))  # the hint always goes on
         genomes, sources = genomes[keep], sources[keep]
         traced("floor pass", genomes)
-    if anamorphic:
+    if second_search:
         # the floor hypotheses again under other pixel aspects: their floors are the same, so
         # only the ranking with the walls below can tell them apart
         variants, _ = search.aspect_variants(genomes[sources == LINES], model, image_size)
@@ -622,7 +634,7 @@ def calibrate(
     spec: str = "wsf",
     moving_mask: np.ndarray | None = None,
     progress: ProgressFn | None = None,
-    anamorphic: bool = False,
+    second_search: bool = False,
 ) -> CalibrationResult:
     """Fit the camera to one image (BGR/BGRA/grey photo, or an edge image).
 
@@ -631,10 +643,11 @@ def calibrate(
     and `time_budget_s` bound it. Raises ValueError for bad input and CourtNotFound when the best
     camera is not a court.
 
-    Anamorphic frames: when no court is found with the usual hypotheses (and no GA), the search
-    runs again with their aspect variants as well (`anamorphic`; see search.ANAMORPHIC_ASPECTS).
-    Only then: with them from the start, a zoomed view, which shows few wall lines, can be
-    explained better by a wrong camera under some aspect than by its own.
+    Anamorphic frames and strong lenses: when no court is found with the usual hypotheses (and
+    no GA), the search runs again (`second_search`) with their aspect variants as well (see
+    search.ANAMORPHIC_ASPECTS) and with lines straightened by more lenses (see
+    `search_cameras`). Only then: with them from the start, a zoomed view, which shows few wall
+    lines, can be explained better by a wrong camera under some aspect than by its own.
     """
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
@@ -669,7 +682,7 @@ def calibrate(
     t0 = time.perf_counter()
     report("optimising", 0.0, {})
     verify = search.verify_samples(model)
-    found = search_cameras(ev, maps, model, size, hint, verify, anamorphic=anamorphic)
+    found = search_cameras(ev, maps, model, size, hint, verify, second_search=second_search)
     timings["search"] = time.perf_counter() - t0
     if len(found.candidates) == 0:
         raise CourtNotFound("court not found: no camera fits the lines in the picture", found.info)
@@ -755,11 +768,11 @@ def calibrate(
     report("refining", 0.9, {})
     if judged.label == "not_a_court":
         timings["total"] = time.perf_counter() - t_start
-        if bundle_config is None and not anamorphic:
+        if bundle_config is None and not second_search:
             try:
                 # progress is not reported again: it would run backwards
                 second = calibrate(
-                    arr, start_genome=hint, spec=spec, moving_mask=moving_mask, anamorphic=True
+                    arr, start_genome=hint, spec=spec, moving_mask=moving_mask, second_search=True
                 )
             except CourtNotFound:
                 pass
