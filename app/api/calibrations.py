@@ -92,7 +92,6 @@ async def upload_calibration(
     # 404 or 429 before reading a byte of the body
     await run_in_threadpool(owned_court_with_room_in_the_queue)
     job_id = new_id()
-    commit_sent = False
     store = media.media_store(settings)
     target = store.create_job_dir(job_id)
     try:
@@ -117,14 +116,14 @@ async def upload_calibration(
                     max_attempts=settings.max_attempts,
                 )
 
-        commit_sent = True
         await run_in_threadpool(commit_job)
     except OperationalError:
         # The connection can drop after the database committed and before it said so: then
         # the job exists, and removing its media would lose an accepted upload (and the
         # client's retry of the 503 would queue it twice). Keep the media unless the job is
         # known not to exist; a folder without a job is swept later (orphan_media_grace_s).
-        stored = await run_in_threadpool(_job_stored, state, job_id) if commit_sent else False
+        # (The commit is the only database call in this block.)
+        stored = await run_in_threadpool(_job_stored, state, job_id)
         if stored is True:
             return _accepted(job_id)
         if stored is False:
