@@ -746,8 +746,13 @@ def calibrate(
     )
     polished = refine.best_of_perturbed_starts(fit, samples, maps, refine_taus(width)[1:])
     plain = fit
-    fit = refine.select_model(polished, samples, maps, width)
-    fit = refine.refit_from_wide(fit, samples, maps, refine_taus(width))
+
+    def with_chosen_model(start: refine.Fit) -> refine.Fit:
+        """The camera model the evidence asks for, refitted from a wide truncation."""
+        chosen = refine.select_model(start, samples, maps, width)
+        return refine.refit_from_wide(chosen, samples, maps, refine_taus(width))
+
+    fit = with_chosen_model(polished)
     report("refining", 0.7, {})
     judged, uncertainty = judge_camera(fit, samples, verify, maps, model, size, found.info)
     if polished is not plain:
@@ -757,8 +762,7 @@ def calibrate(
         # refused without them passed with them), and a line a right camera was accepted on
         # can slip off within the verdict's tight tolerance (seeds 3000+: a zoomed view refused
         # with them). Where either camera is refused, the one without them stands.
-        plain = refine.select_model(plain, samples, maps, width)
-        plain = refine.refit_from_wide(plain, samples, maps, refine_taus(width))
+        plain = with_chosen_model(plain)
         plain_judged, plain_uncertainty = judge_camera(
             plain, samples, verify, maps, model, size, found.info
         )
