@@ -28,9 +28,21 @@ LINK_MAX_ANGLE_RAD = np.deg2rad(8.0)
 LINK_MAX_ACROSS = 0.8
 # Chains shorter than this (px at 1920 px wide, scaled with the width) are noise for our purposes.
 MIN_CHAIN_PX_AT_1920 = 24.0
-# Distortion: chains at least this long (share of the image width) vote, on this lambda grid.
+# Distortion: chains at least this long (share of the image width) vote, on this lambda grid
+# (the strongest barrel lenses of bench.synthetic's wide-angle views need about -0.6 in the
+# middle of the picture and more towards its edges, which one term cannot follow).
 DISTORTION_CHAIN_FRACTION = 0.12
-LAMBDA_GRID = np.linspace(-0.6, 0.3, 91)
+LAMBDA_GRID = np.linspace(-1.2, 0.4, 161)
+# A chain is straight under a lambda when its points lie within about this RMS (px) of a line
+# (edge pixels' sub-pixel positions scatter by a few tenths of a pixel).
+STRAIGHT_PX = 0.6
+# The division model is not used where it would fold (1 + lambda r^2 below this).
+MIN_DIVISION_DENOMINATOR = 0.25
+# A second lambda: support at least this share of the best's, this far from it.
+SECOND_LENS_SUPPORT = 0.5
+SECOND_LENS_MIN_DIFFERENCE = 0.08
+# The least-squares refinement looks this many grid steps either way of the consensus.
+REFINE_GRID_STEPS = 15
 # A straight piece fits its line with at most this RMS (px), else it is split.
 SPLIT_RMS_PX = 0.8
 # A chain whose points, ordered along it, step across it by more than this is a web of lines
@@ -196,43 +208,94 @@ def _line_fit_rms(points: np.ndarray) -> float:
     return float(np.sqrt(max(np.linalg.eigvalsh(cov)[0], 0.0)))
 
 
-def estimate_undistortion(chains: Chains, image_size: tuple[int, int]) -> Undistortion:
-    """The division-model lambda that straightens the long chains best (0 if none is long)."""
+def _straightness_px(points: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
+    """(len(LAMBDA_GRID),) RMS distance (px of the picture) of a chain's points from the line
+    fitted to them after undistortion with each lambda of the grid; inf where the division
+    model folds over the chain. Residuals are measured in the picture's pixels, not the
+    undistorted frame's: a strong barrel lambda spreads the frame out towards the edges, and
+    measured there every chain would look less straight the stronger the lens."""
+    d = points - centre
+    r2 = np.sum(d * d, axis=1) / (radius * radius)
+    out = np.full(len(LAMBDA_GRID), np.inf)
+    for k, lam in enumerate(LAMBDA_GRID):
+        den = 1.0 + lam * r2
+        if np.any(den < MIN_DIVISION_DENOMINATOR):
+            continue
+        und = d / den[:, None]
+        centred = und - und.mean(axis=0)
+        _, vecs = np.linalg.eigh(centred.T @ centred)
+        out[k] = float(np.sqrt(np.mean((centred @ vecs[:, 0] * den) ** 2)))
+    return out
+
+
+def undistortion_candidates(chains: Chains, image_size: tuple[int, int]) -> list[Undistortion]:
+    """The division-model lambdas that straighten the long chains (plumb-line method), most
+    supported first: the best, and a second when the chains also agree clearly on another.
+
+    A consensus, not a least-squares fit: each chain votes, by the square root of its number of
+    points (a long chain is a more precise witness, not a more trustworthy one: a score
+    graphic's edge is long), for the lambdas that make it straight to about STRAIGHT_PX (a soft
+    count), and the best lambda is
+    then refined by least squares over the chains straight there. Least squares over all chains
+    let the few that no lambda makes straight (a player's outline, two lines joined at a corner,
+    a curved advert) pull the estimate anywhere: on bench.synthetic's wide-angle views it came
+    out as a mild pincushion for strong barrel lenses. A second lambda is kept when its support
+    is at least SECOND_LENS_SUPPORT of the best's: a score graphic's long straight edges vote for
+    no distortion at all, however strong the lens, and only the court can tell them apart."""
     width, height = image_size
     centre = camera.picture_centre(image_size)
     radius = 0.5 * float(np.hypot(width, height))
     min_len = DISTORTION_CHAIN_FRACTION * width
-    voters = []
-    for c in range(len(chains)):
-        pts = chains.chain(c)
-        extent = np.ptp(pts, axis=0)
-        if float(np.hypot(*extent)) >= min_len:
-            voters.append(pts)
+    voters = [
+        chains.chain(c)
+        for c in range(len(chains))
+        if float(np.hypot(*np.ptp(chains.chain(c), axis=0))) >= min_len
+    ]
     if not voters:
-        return Undistortion(centre, radius, 0.0)
-    costs = np.zeros(len(LAMBDA_GRID))
-    per_chain = np.empty((len(voters), len(LAMBDA_GRID)))
-    for i, pts in enumerate(voters):
-        d = pts - centre
-        r2 = np.sum(d * d, axis=1) / (radius * radius)
-        for k, lam in enumerate(LAMBDA_GRID):
-            und = centre + d / (1.0 + lam * r2)[:, None]
-            per_chain[i, k] = _line_fit_rms(und)
-    # chains that no lambda makes straight (a player's outline, a logo) do not vote
-    straightenable = per_chain.min(axis=1) <= 1.5
-    if not np.any(straightenable):
-        return Undistortion(centre, radius, 0.0)
-    weights = np.array([len(v) for v in voters], dtype=np.float64)[straightenable]
-    costs = (weights[:, None] * np.minimum(per_chain[straightenable], 4.0) ** 2).sum(axis=0)
-    k = int(np.argmin(costs))
-    lam = float(LAMBDA_GRID[k])
-    if 0 < k < len(LAMBDA_GRID) - 1:
-        c0, c1, c2 = costs[k - 1], costs[k], costs[k + 1]
-        denom = c0 - 2 * c1 + c2
-        if denom > 0:
-            step = LAMBDA_GRID[1] - LAMBDA_GRID[0]
-            lam += float(0.5 * (c0 - c2) / denom * step)
-    return Undistortion(centre, radius, lam)
+        return [Undistortion(centre, radius, 0.0)]
+    rms = np.array([_straightness_px(pts, centre, radius) for pts in voters])
+    weights = np.sqrt(np.array([len(v) for v in voters], dtype=np.float64))
+    support = (weights[:, None] * np.exp(-0.5 * (rms / STRAIGHT_PX) ** 2)).sum(axis=0)
+    if not np.any(support > 0.0):
+        return [Undistortion(centre, radius, 0.0)]
+    n = len(LAMBDA_GRID)
+    peaks = [
+        k
+        for k in range(n)
+        if (k == 0 or support[k] >= support[k - 1]) and (k == n - 1 or support[k] >= support[k + 1])
+    ]
+    peaks.sort(key=lambda k: -support[k])
+    chosen = [peaks[0]]
+    for k in peaks[1:]:
+        if support[k] < SECOND_LENS_SUPPORT * support[peaks[0]]:
+            break
+        if abs(LAMBDA_GRID[k] - LAMBDA_GRID[peaks[0]]) >= SECOND_LENS_MIN_DIFFERENCE:
+            chosen.append(k)
+            break
+    return [Undistortion(centre, radius, _refined_lambda(rms, weights, k)) for k in chosen]
+
+
+def _refined_lambda(rms: np.ndarray, weights: np.ndarray, k: int) -> float:
+    """The lambda near grid point k that minimises the squared residuals of the chains straight
+    at k (parabolic interpolation between grid points)."""
+    inliers = rms[:, k] <= 2.0 * STRAIGHT_PX
+    if not inliers.any():
+        return float(LAMBDA_GRID[k])
+    cost = (weights[inliers, None] * np.minimum(rms[inliers], 3.0 * STRAIGHT_PX) ** 2).sum(axis=0)
+    lo, hi = max(0, k - REFINE_GRID_STEPS), min(len(LAMBDA_GRID), k + REFINE_GRID_STEPS + 1)
+    best = lo + int(np.argmin(cost[lo:hi]))
+    lam = float(LAMBDA_GRID[best])
+    if 0 < best < len(LAMBDA_GRID) - 1:
+        c0, c1, c2 = cost[best - 1], cost[best], cost[best + 1]
+        denom = c0 - 2.0 * c1 + c2
+        if denom > 0.0 and np.isfinite(denom):
+            lam += float(0.5 * (c0 - c2) / denom * (LAMBDA_GRID[1] - LAMBDA_GRID[0]))
+    return lam
+
+
+def estimate_undistortion(chains: Chains, image_size: tuple[int, int]) -> Undistortion:
+    """The division-model lambda that straightens the long chains best (0 if none is long)."""
+    return undistortion_candidates(chains, image_size)[0]
 
 
 def _split(points: np.ndarray, out: list[tuple[int, int]], lo: int, hi: int) -> None:
