@@ -66,6 +66,63 @@ def test_floor_hypotheses_contain_the_camera_that_made_the_lines():
     assert np.all(down_in_camera[:, 1] > 0)
 
 
+def _with_legs(image_lines: segments.ImageLines, legs: list[tuple[np.ndarray, np.ndarray]]):
+    """The image lines plus the outline of a player's legs (segments (p, q)), as strong as the
+    court's lines."""
+    normals, offsets = [], []
+    for p, q in legs:
+        d = (q - p) / np.linalg.norm(q - p)
+        normals.append([-d[1], d[0]])
+        offsets.append(float(np.array([-d[1], d[0]]) @ p))
+    count = len(image_lines) + len(legs)
+    return segments.ImageLines(
+        normal=np.vstack([image_lines.normal, normals]),
+        offset=np.concatenate([image_lines.offset, offsets]),
+        extent=np.concatenate([image_lines.extent, np.array([[p, q] for p, q in legs])]),
+        support_px=np.concatenate([image_lines.support_px, np.full(len(legs), 150.0)]),
+        contrast=np.full(count, 20.0),
+        ridge_share=np.ones(count),
+        members=tuple((i,) for i in range(count)),
+    )
+
+
+def test_vanishing_triads_find_the_floor_when_a_player_takes_the_half_court_line():
+    # Behind the court: the floor's lines across are parallel in the picture, the half-court
+    # line runs straight up it, one box side is seen. A player standing on the half-court line
+    # adds four leg outlines meeting just above it: the greedy groups give the legs and the
+    # half-court line a point of their own, and the box side is left alone; the triad of the
+    # across lines and the walls' corners puts the box side and the half-court line together.
+    truth = _pinhole_target()
+    model = court.court_model()
+    names = [
+        "short_left_inner",
+        "short_right_inner",
+        "box_left_back",
+        "box_right_back",
+        "front_floor",
+        "half_court",
+        "box_left_side",
+        "front_left_corner_high",
+        "front_right_corner_high",
+    ]
+    half_court = camera.project_visible(
+        truth, model.nodes[model.edges[model.edge_names.index("half_court")]]
+    )
+    top = half_court[np.argmin(half_court[:, 1])]
+    meeting = top + np.array([0.0, -60.0])
+    legs = []
+    for offset_px in (-100.0, -37.5, 37.5, 100.0):
+        p = top + np.array([offset_px, 200.0])
+        legs.append((p, p + 0.5 * (meeting - p)))
+    image_lines = _with_legs(_image_lines(truth, names), legs)
+    groups = search.vanishing_groups(image_lines)
+    greedy = search.floor_hypotheses(image_lines, groups, model, SIZE, None)
+    assert _floor_error_px(truth, greedy).min() > 10.0
+    triads = search.vanishing_triads(image_lines, SIZE)
+    with_triads = search.floor_hypotheses(image_lines, groups, model, SIZE, None, triads)
+    assert _floor_error_px(truth, with_triads).min() < 0.1
+
+
 FRONT_WALL_LINES = ["service", "tin", "front_out", "front_floor"]
 
 
@@ -381,3 +438,46 @@ def test_chains_segments_and_the_lens(rendered):
     ends = lens.apply(camera.project_visible(truth, np.array([a, b])))
     distance = np.abs(ends @ image_lines.normal.T - image_lines.offset[None, :]).max(axis=0)
     assert distance.min() < 1.5
+
+
+def _chains(polylines: list[np.ndarray]) -> segments.Chains:
+    points = np.concatenate(polylines)
+    start = np.concatenate([[0], np.cumsum([len(p) for p in polylines])]).astype(np.int64)
+    return segments.Chains(points, start, np.ones(len(points), bool), np.full(len(points), 20.0))
+
+
+def _through_lens(undistorted: np.ndarray, focal_px: float, k1: float, k2: float) -> np.ndarray:
+    """Pixels of ideal-pinhole points (pixels, square and centred) through a Brown lens."""
+    centre = camera.picture_centre(SIZE)
+    normalised = (undistorted - centre) / focal_px
+    r2 = np.sum(normalised * normalised, axis=1, keepdims=True)
+    return centre + focal_px * normalised * (1.0 + k1 * r2 + k2 * r2 * r2)
+
+
+def test_the_lens_the_court_lines_agree_on_is_a_candidate_beside_a_straight_graphic():
+    # A strong wide-angle lens (k1 -0.25, k2 0.03 at f = 0.55 of the width, the corners near
+    # where the lens folds) bends eight court lines beyond what one division-model term
+    # straightens exactly; a score graphic's long edges run straight across the picture (drawn
+    # on it, not seen through the lens), with more points than any court line. The lens is
+    # what the court lines agree on, as with them alone; the graphic's "no lens" is a second
+    # candidate.
+    rng = np.random.default_rng(3)
+    centre = camera.picture_centre(SIZE)
+    focal = 0.55 * SIZE[0]
+    polylines = []
+    for k in range(8):
+        angle = np.pi * k / 8 + 0.1
+        direction = np.array([np.cos(angle), np.sin(angle)])
+        normal = np.array([-direction[1], direction[0]])
+        along = np.linspace(-400.0, 400.0, 400)[:, None] * direction
+        pixels = _through_lens(centre + 80.0 * (1 + k % 4) * normal + along, focal, -0.25, 0.03)
+        inside = camera.pixels_in_image(pixels, SIZE)
+        polylines.append(pixels[inside] + rng.normal(0.0, 0.15, (int(inside.sum()), 2)))
+    court_alone = segments.undistortion_candidates(_chains(polylines), SIZE)
+    assert len(court_alone) == 1 and court_alone[0].lam < -0.3
+    for row in (30.0, 500.0):
+        polylines.append(np.column_stack([np.linspace(20.0, 940.0, 1500), np.full(1500, row)]))
+    candidates = segments.undistortion_candidates(_chains(polylines), SIZE)
+    assert len(candidates) == 2
+    assert candidates[0].lam == pytest.approx(court_alone[0].lam, abs=0.02)
+    assert abs(candidates[1].lam) < 0.03

@@ -56,6 +56,7 @@ DEFAULT_MAX_GENERATIONS = 3000
 # Search: distinct hypotheses polished (from the lines and the hint; from the placement grid),
 # the polish's truncations (px at 1920 px wide) and budget, and how many go on to refinement.
 FLOOR_PASS_HYPOTHESES = 15000
+WALL_PASS_HYPOTHESES = 5000
 VERIFIED_HYPOTHESES = 2000
 # |lambda| (division model, radius in half-diagonals) above which other lenses are tried too,
 # as these multiples of the estimate: a weaker one in every search, more in the second search
@@ -253,7 +254,8 @@ def search_cameras(
 
     width, _ = image_size
     chains = segments.chains_of(evidence)
-    undistortion = segments.estimate_undistortion(chains, image_size)
+    lenses = segments.undistortion_candidates(chains, image_size)
+    undistortion = lenses[0]
     min_length = max(10.0, 30.0 * width / 1920.0)
     # The plumb-line estimate leans on the long lines at the picture's edge, where a real lens
     # departs most from the one-term model, and overshoots the centre's distortion there: a
@@ -263,18 +265,23 @@ def search_cameras(
     # -0.24 to -0.27, hypotheses 1.5-7 px off. The second search (after a refusal) tries a
     # stronger lens too. Not the first: more lenses there give more near-copies of the right
     # camera with other lenses, and on seeds 1000+ two wide-angle views found with the
-    # estimate's lens ended with another's, their picture's corners 4-5 px off.
+    # estimate's lens ended with another's, their picture's corners 4-5 px off. A second lens
+    # the chains agree on (`segments.undistortion_candidates`) is tried as it is.
     factors = STRONG_LENS_FACTORS_SECOND_SEARCH if second_search else STRONG_LENS_FACTORS
     lens_candidates = [undistortion.lam]
     if abs(undistortion.lam) > STRONG_LENS_LAMBDA:
         lens_candidates += [factor * undistortion.lam for factor in factors]
+    lens_candidates += [other.lam for other in lenses[1:]]
     line_parts = []
     n_lines = n_groups = 0
     for lam in lens_candidates:
         lens = segments.Undistortion(undistortion.centre, undistortion.radius_px, lam)
         image_lines = segments.merge_collinear(segments.segments_of(chains, lens, min_length))
         groups = search.vanishing_groups(image_lines)
-        line_parts.append(search.floor_hypotheses(image_lines, groups, model, image_size, lens))
+        triads = search.vanishing_triads(image_lines, image_size)
+        line_parts.append(
+            search.floor_hypotheses(image_lines, groups, model, image_size, lens, triads)
+        )
         line_parts.append(
             search.front_wall_hypotheses(image_lines, groups, model, image_size, lens)
         )
@@ -289,9 +296,17 @@ def search_cameras(
     traced("hypotheses", genomes)
     # a cheap ranking of everything, then the verification proper of the best
     rank_tolerance = search.rank_tolerance_px(width)
-    if len(genomes) > FLOOR_PASS_HYPOTHESES:
-        first = search.coarse_scores(genomes, model, maps, (rank_tolerance,), floor_only=True)[:, 0]
-        keep = np.argpartition(-first, FLOOR_PASS_HYPOTHESES)[:FLOOR_PASS_HYPOTHESES]
+    if len(genomes) > FLOOR_PASS_HYPOTHESES + WALL_PASS_HYPOTHESES:
+        # the best on the floor, and the best on the walls: a floor of planks or worn lines
+        # says little (on bench.synthetic's wide_angle 7011, a corner view over planks, the
+        # true camera ranked 40 000th of 85 000 on the floor, its walls' lines clear)
+        by_floor, by_walls = (
+            search.coarse_scores(genomes, model, maps, (rank_tolerance,), part)[:, 0]
+            for part in ("floor", "walls")
+        )
+        keep = np.union1d(
+            _best_rows(by_floor, FLOOR_PASS_HYPOTHESES), _best_rows(by_walls, WALL_PASS_HYPOTHESES)
+        )
         keep = np.union1d(keep, np.flatnonzero(sources == HINT))  # the hint always goes on
         genomes, sources = genomes[keep], sources[keep]
         traced("floor pass", genomes)

@@ -2,8 +2,9 @@
 evidence.
 
 1. Vanishing groups. Court lines run in three directions; in the image the lines of one direction
-   meet in a vanishing point (possibly at infinity). `vanishing_groups` finds up to three groups
-   of image lines by consensus over pairwise intersections.
+   meet in a vanishing point (possibly at infinity). `vanishing_groups` finds up to five groups
+   of image lines by consensus over pairwise intersections, one after the other;
+   `vanishing_triads` finds triples of points of three orthogonal directions at once.
 2. Floor hypotheses. Two lines of one group taken as two floor lines across the court (y constant:
    front junction, short line, box backs, back junction) and two of another as two floor lines
    along it (x constant: side junctions, box sides, half-court line) meet in four image points of
@@ -213,6 +214,136 @@ def vanishing_groups(lines: ImageLines, n_groups: int = 5) -> list[VanishingGrou
         idx = np.flatnonzero(members)
         groups.append(VanishingGroup(vp, idx, float(support[idx].sum())))
     return groups
+
+
+# Vanishing triads: candidate points (distinct consensus sets, best first) paired into triads,
+# focal lengths tried when one of the pair lies at infinity (the pair then does not fix it),
+# and how many distinct triads are kept.
+TRIAD_CANDIDATE_POINTS = 40
+TRIAD_FOCAL_STEPS = 12
+TRIADS = 5
+# Two consensus sets are the same when they share more than this share of the smaller one.
+SAME_MEMBERS_SHARE = 0.5
+
+
+def _same_members(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two bool member masks (L,) share more than SAME_MEMBERS_SHARE of the smaller."""
+    smaller = min(int(a.sum()), int(b.sum()))
+    return bool(smaller and (a & b).sum() > SAME_MEMBERS_SHARE * smaller)
+
+
+def _toward_centred(vp: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Unit direction from the principal point towards a vanishing point given relative to it
+    (homogeneous), and whether the point is finite."""
+    norm_xy = float(np.linalg.norm(vp[:2]))
+    if abs(vp[2]) < 1e-9 * norm_xy:
+        return vp[:2] / norm_xy, False
+    d = vp[:2] / vp[2]
+    return d / max(float(np.linalg.norm(d)), 1e-300), True
+
+
+def vanishing_triads(
+    lines: ImageLines, image_size: tuple[int, int], n_triads: int = TRIADS
+) -> list[tuple[VanishingGroup, VanishingGroup, VanishingGroup]]:
+    """Up to `n_triads` distinct triples of vanishing points of three orthogonal directions (a
+    square-pixel camera with its principal point at the centre), with the lines through each,
+    best supported first.
+
+    The greedy `vanishing_groups` takes each line for the first point it fits: the half-court
+    line of a camera behind the court runs through the floor's and the walls' vertical points
+    alike, a player's legs make a point of their own, and the few short lines along the court
+    (box sides, half-court line) are then left without a group. Here two candidate points
+    (consensus sets of pairwise intersections) fix the focal length, and with it the third
+    direction's point; the triple is scored by the support of every line through any of the
+    three. Two candidates at right angles with one at infinity do not fix the focal length:
+    a grid of focal lengths is tried."""
+    count = min(len(lines), VANISHING_MAX_LINES)
+    if count < 3:
+        return []
+    width = image_size[0]
+    centre = camera.picture_centre(image_size)
+    to_centred = np.array([[1.0, 0.0, -centre[0]], [0.0, 1.0, -centre[1]], [0.0, 0.0, 1.0]])
+    from_centred = np.linalg.inv(to_centred)
+    homog = lines.homogeneous()[:count]
+    mid, direction, length = _line_directions(lines)
+    mid, direction, length = mid[:count], direction[:count], length[:count]
+    support = lines.support_px[:count]
+    ii, jj = np.triu_indices(count, 1)
+    points = np.cross(homog[ii], homog[jj])
+    points = points[np.any(points != 0, axis=1)]
+    points /= np.linalg.norm(points, axis=1, keepdims=True)
+    consistent = _consistency_matrix(points, mid, direction, length)
+    scores = consistent.astype(np.float64) @ support
+    # any two lines meet somewhere: a point's evidence is the support of its lines beyond the
+    # two strongest, and only points with more lines than that make triads
+    by_support = np.where(consistent, support[None, :], 0.0)
+    pair_support = np.sort(by_support, axis=1)[:, -2:].sum(axis=1)
+    kept: list[int] = []
+    for p in np.argsort(-scores, kind="stable"):
+        if scores[p] <= 0.0 or len(kept) >= TRIAD_CANDIDATE_POINTS:
+            break
+        if consistent[p].sum() < 3 or any(
+            _same_members(consistent[p], consistent[q]) for q in kept
+        ):
+            continue
+        kept.append(int(p))
+    focal_min, focal_max = (share * width for share in FOCAL_RANGE_OF_WIDTH)
+    found: list[tuple[float, int, int, np.ndarray]] = []
+    for ia, a in enumerate(kept):
+        for b in kept[ia + 1 :]:
+            va, vb = to_centred @ points[a], to_centred @ points[b]
+            da, finite_a = _toward_centred(va)
+            db, finite_b = _toward_centred(vb)
+            if finite_a and finite_b:
+                f2 = -float(va[:2] @ vb[:2]) / float(va[2] * vb[2])
+                if not focal_min**2 <= f2 <= focal_max**2:
+                    continue
+                focals = np.array([np.sqrt(f2)])
+            elif finite_a or finite_b:
+                if abs(float(da @ db)) > MAX_AXES_COS:
+                    continue
+                focals = np.geomspace(focal_min, focal_max, TRIAD_FOCAL_STEPS)
+            else:
+                continue
+            thirds = []
+            for f in focals:
+                k, k_inv = np.diag([f, f, 1.0]), np.diag([1.0 / f, 1.0 / f, 1.0])
+                third = from_centred @ (k @ np.cross(k_inv @ va, k_inv @ vb))
+                thirds.append(third / np.linalg.norm(third))
+            through_third = _consistency_matrix(np.array(thirds), mid, direction, length)
+            members = consistent[a] | consistent[b]
+            totals = (members[None, :] | through_third).astype(np.float64) @ support
+            # every focal length is a triad of its own: where it is free, the third point may
+            # land on the lines of another direction, or on a player's legs
+            for total, third in zip(totals, thirds, strict=True):
+                found.append((float(total - pair_support[a] - pair_support[b]), a, b, third))
+    found.sort(key=lambda item: -item[0])
+    triads: list[tuple[VanishingGroup, VanishingGroup, VanishingGroup]] = []
+    kept_masks: list[np.ndarray] = []
+    for _, a, b, third in found:
+        masks = np.vstack(
+            [
+                consistent[a],
+                consistent[b],
+                _consistency_matrix(third[None], mid, direction, length)[0],
+            ]
+        )
+        # the same triad: the same three points
+        if any(
+            all(any(_same_members(m, other) for other in earlier) for m in masks)
+            for earlier in kept_masks
+        ):
+            continue
+        kept_masks.append(masks)
+        triads.append(
+            tuple(  # type: ignore[arg-type]
+                VanishingGroup(vp, np.flatnonzero(m), float(support[m].sum()))
+                for vp, m in zip((points[a], points[b], third), masks, strict=True)
+            )
+        )
+        if len(triads) >= n_triads:
+            break
+    return triads
 
 
 def floor_line_values(model: CourtModel) -> tuple[np.ndarray, np.ndarray]:
@@ -1022,10 +1153,13 @@ def floor_hypotheses(
     model: CourtModel,
     image_size: tuple[int, int],
     undistortion: Undistortion | None,
+    triads: list[tuple[VanishingGroup, VanishingGroup, VanishingGroup]] | None = None,
 ) -> np.ndarray:
     """Plausible cameras (N, 15) from every pair of groups taken as (across, along) floor
     lines (see the module doc); a third group that can be the vertical adds cameras with a free
-    principal point and with non-square pixels."""
+    principal point and with non-square pixels. The two floor directions of each of the
+    `triads` (`vanishing_triads`) are tried as well, for square pixels at the centre, where
+    they are not already a pair of `groups`."""
     width, height = image_size
     across_values, along_values = floor_line_values(model)
     homog = lines.homogeneous()
@@ -1038,32 +1172,59 @@ def floor_hypotheses(
     dxs = (along_values[:, None] - along_values[None, :])[~np.eye(len(along_values), dtype=bool)]
     dys = (across_values[:, None] - across_values[None, :])[~np.eye(len(across_values), dtype=bool)]
     ratios2 = np.unique((dxs[:, None] ** 2 / dys[None, :] ** 2).ravel())
+
+    def add_calls(ga: VanishingGroup, gb: VanishingGroup, verticals: list[np.ndarray]) -> None:
+        square_centred = could_be_orthogonal(ga.point, gb.point, centre, width)
+        if not square_centred and not (
+            verticals
+            and could_be_orthogonal(ga.point, gb.point, centre, width, OFF_CENTRE_VP_MAX_COS)
+        ):
+            return
+        a = homog[strongest(ga.lines, strength, QUADRUPLE_LINES_PER_GROUP)]
+        b = homog[strongest(gb.lines, strength, QUADRUPLE_LINES_PER_GROUP)]
+        if len(a) < 2 or len(b) < 2:
+            return
+        for vertical in verticals or [np.zeros(3)]:
+            unit_vertical = vertical / max(np.linalg.norm(vertical), 1e-300)
+            calls.append((a, b, unit_vertical, square_centred))
+
+    def can_be_vertical(gz: VanishingGroup, ga: VanishingGroup, gb: VanishingGroup) -> bool:
+        return could_be_vertical(gz.point, centre) and beyond_horizon(
+            gz.point, ga.point, gb.point, centre
+        )
+
     for ga in groups:
         for gb in groups:
             if ga is gb:
                 continue
-            square_centred = could_be_orthogonal(ga.point, gb.point, centre, width)
             # the best-supported other group that can be the vertical, if any
             verticals = [
                 to_centred @ gz.point
                 for gz in sorted(groups, key=lambda g: -g.support_px)
-                if gz is not ga
-                and gz is not gb
-                and could_be_vertical(gz.point, centre)
-                and beyond_horizon(gz.point, ga.point, gb.point, centre)
+                if gz is not ga and gz is not gb and can_be_vertical(gz, ga, gb)
             ][:1]
-            if not square_centred and not (
-                verticals
-                and could_be_orthogonal(ga.point, gb.point, centre, width, OFF_CENTRE_VP_MAX_COS)
-            ):
+            add_calls(ga, gb, verticals)
+    member_masks = [np.isin(np.arange(len(lines)), g.lines) for g in groups]
+
+    def is_a_group(g: VanishingGroup) -> bool:
+        mask = np.isin(np.arange(len(lines)), g.lines)
+        return any(np.array_equal(mask, other) for other in member_masks)
+
+    # A triad's points are orthogonal directions for a square-pixel camera at the centre by
+    # construction: its floor pairs are tried for that camera only (the other intrinsics, from
+    # a vertical, cost twenty times as much and come from the groups' pairs).
+    for triad in triads or []:
+        upright = [
+            can_be_vertical(triad[z], *(triad[i] for i in range(3) if i != z)) for z in range(3)
+        ]
+        for z in range(3):
+            if any(upright) and not upright[z]:
+                continue  # another of the triad's points is the vertical
+            ga, gb = (triad[i] for i in range(3) if i != z)
+            if is_a_group(ga) and is_a_group(gb):
                 continue
-            a = homog[strongest(ga.lines, strength, QUADRUPLE_LINES_PER_GROUP)]
-            b = homog[strongest(gb.lines, strength, QUADRUPLE_LINES_PER_GROUP)]
-            if len(a) < 2 or len(b) < 2:
-                continue
-            for vertical in verticals or [np.zeros(3)]:
-                unit_vertical = vertical / max(np.linalg.norm(vertical), 1e-300)
-                calls.append((a, b, unit_vertical, square_centred))
+            add_calls(ga, gb, [])
+            add_calls(gb, ga, [])
 
     def hypotheses_of(
         call: tuple[np.ndarray, np.ndarray, np.ndarray, bool],
@@ -1709,6 +1870,7 @@ def edge_support(
 
 
 COARSE_SPACING_M = 0.6
+# sample spacing of the first cut (floor or walls alone)
 FLOOR_PASS_SPACING_M = 0.8
 
 
@@ -1787,20 +1949,20 @@ def coarse_scores(
     model: CourtModel,
     maps: EvidenceMaps,
     tolerances_px: tuple[float, ...],
-    floor_only: bool = False,
+    part: str = "court",
 ) -> np.ndarray:
-    """`_coarse_njit` over a sparse sampling of the court, or of its floor only (sparser: a
-    first cut through hundreds of thousands of hypotheses): (N, T), one column per tolerance
-    (one projection serves them all)."""
-    if floor_only:
-        floor_edges = [
-            name
-            for name, (a, b) in zip(model.edge_names, model.edges, strict=True)
-            if model.nodes[a][2] == 0.0 and model.nodes[b][2] == 0.0
-        ]
-        samples = verify_samples(model.subset(floor_edges), FLOOR_PASS_SPACING_M)
-    else:
+    """`_coarse_njit` over a sparse sampling of the court, or (sparser: a first cut through
+    hundreds of thousands of hypotheses) of its floor or its walls only (`part`: "court",
+    "floor", "walls"): (N, T), one column per tolerance (one projection serves them all)."""
+    if part == "court":
         samples = verify_samples(model, COARSE_SPACING_M)
+    else:
+        on_floor = (model.nodes[model.edges][..., 2] == 0.0).all(axis=1)
+        if part not in ("floor", "walls"):
+            raise ValueError(f"part must be 'court', 'floor' or 'walls', got {part!r}")
+        keep = on_floor if part == "floor" else ~on_floor
+        edges = [name for name, kept in zip(model.edge_names, keep, strict=True) if kept]
+        samples = verify_samples(model.subset(edges), FLOOR_PASS_SPACING_M)
     same = np.concatenate([[False], samples.edge[1:] == samples.edge[:-1]])
     chances = np.stack([chance_maps(maps, tol).values for tol in tolerances_px])
     out = np.empty((len(genomes), len(tolerances_px)))
