@@ -71,6 +71,7 @@ def _typical_right() -> dict[str, float]:
         "floor_error_t_cm": 0.5,
         "floor_share": 0.3,
         "camera_in_play_volume": 0.0,
+        "camera_behind_front_wall": 0.0,
     }
 
 
@@ -92,6 +93,7 @@ def test_typical_right_figures_are_good():
         ({"floor_share": 0.01}, "film the floor"),
         ({"absent_fraction": 0.7}, "has no line there"),
         ({"camera_in_play_volume": 1.0}, "where the players play"),
+        ({"camera_behind_front_wall": 1.0}, "behind the front wall"),
         ({"pixel_aspect": 0.89, "wall_edges_supported": 2.0}, "non-square pixels"),
         ({"principal_point_offset_share": 0.2, "wall_edges_supported": 2.0}, "off-centre"),
     ],

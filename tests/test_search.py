@@ -481,3 +481,20 @@ def test_the_lens_the_court_lines_agree_on_is_a_candidate_beside_a_straight_grap
     assert len(candidates) == 2
     assert candidates[0].lam == pytest.approx(court_alone[0].lam, abs=0.02)
     assert abs(candidates[1].lam) < 0.03
+
+
+@pytest.mark.parametrize(
+    ("centre", "behind"),
+    [
+        ([3.2, -5.0, -2.0], True),  # behind the front wall, below its top: sees no court
+        ([3.2, -5.0, -7.0], False),  # high above it, looking down over it
+        ([3.2, -0.2, -2.0], False),  # mounted on the front wall
+        ([3.2, 12.0, -2.0], False),  # behind the back wall
+    ],
+)
+def test_a_camera_behind_the_front_wall_is_implausible(centre, behind):
+    genome = search.look_at_genomes(
+        np.array([centre]), np.array([[3.2, 5.0, 0.0]]), np.zeros(1), np.array([800.0]), SIZE
+    )
+    assert search.behind_front_wall(genome)[0] == behind
+    assert search.implausible_placement(genome, court.court_model())[0] == behind

@@ -325,7 +325,7 @@ def search_cameras(
         genomes, model, maps, (rank_tolerance, tight_tolerance)
     ).T
     implausible = search.floor_shares(genomes, model, image_size) < search.MIN_FLOOR_SHARE
-    implausible |= search.in_play_volume(genomes, model)
+    implausible |= search.implausible_placement(genomes, model)
     coarse[implausible] = coarse_tight[implausible] = -np.inf
     variant = sources == ASPECT
     square = np.flatnonzero(~variant)
@@ -385,7 +385,7 @@ def search_cameras(
     ).reshape(-1, camera.N_GENES)
     traced("polished", polished)
     _, _, polished_scores = search.edge_support(polished, verify, maps, tight_tolerance)
-    polished_scores[search.in_play_volume(polished, model)] = -np.inf
+    polished_scores[search.implausible_placement(polished, model)] = -np.inf
     best = search.distinct_best(polished, polished_scores, model, image_size, REFINED_CANDIDATES)
     best = np.array([i for i in best if np.isfinite(polished_scores[i])], dtype=np.int64)
     traced("candidates", polished[best])
@@ -452,14 +452,14 @@ def score_cameras(
     the verdict's tighter one: a real court's lines lie a few pixels off any camera model, and
     at 3 px a wrong camera with a few lines exactly on straight edges outscored the right one on
     a real club view); -inf for cameras whose lens folds inside the picture, that stand where
-    players play or are not finite."""
+    players play or behind the front wall, or are not finite."""
     pop = camera.as_population(genomes)
     tolerance = search.verify_tolerance_px(image_size[0])
     _, _, scores = search.edge_support(pop, verify, maps, tolerance)
     for k, g in enumerate(pop):
         if not np.all(np.isfinite(g)) or lens_folds_in_image(g, image_size):
             scores[k] = -np.inf
-    scores[search.in_play_volume(pop, model)] = -np.inf
+    scores[search.implausible_placement(pop, model)] = -np.inf
     return scores
 
 
@@ -616,6 +616,7 @@ def judge_camera(
     figures["rms_px"] = fit.rms_px
     figures["floor_share"] = float(search.floor_shares(fit.genome, model, image_size)[0])
     figures["camera_in_play_volume"] = float(search.in_play_volume(fit.genome, model)[0])
+    figures["camera_behind_front_wall"] = float(search.behind_front_wall(fit.genome)[0])
     figures["pixel_aspect"] = float(fit.genome[camera.GENE["f_v"]] / fit.genome[camera.GENE["f_u"]])
     offset = fit.genome[[camera.GENE["c_u"], camera.GENE["c_v"]]] - camera.picture_centre(
         image_size

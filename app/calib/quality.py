@@ -269,6 +269,11 @@ def verdict(figures: dict[str, float]) -> Verdict:
             "the camera would stand inside the court where the players play, which no fixed "
             "camera does"
         )
+    if figures.get("camera_behind_front_wall", 0.0) > 0.0:
+        refusals.append(
+            "the camera would stand behind the front wall, which is solid: it could not see the "
+            "court from there"
+        )
     if figures["absent_fraction"] > MAX_ABSENT_FRACTION:
         refusals.append(
             f"{figures['absent_fraction']:.0%} of the court the camera predicts in the picture "

@@ -72,6 +72,12 @@ MAX_ROLL_RAD = np.deg2rad(15.0)
 PLAY_VOLUME_WALL_MARGIN_M = 1.0
 PLAY_VOLUME_BACK_MARGIN_M = 2.0
 PLAY_VOLUME_HEIGHT_M = 2.0
+# The front wall is solid in every court (the ball is played against it; glass is only ever at
+# the back and the sides): a camera behind it sees the court only from above its top, which is
+# at least the front-wall out line's height. Margin (m) behind the wall's plane for a camera
+# mounted on it.
+FRONT_WALL_MARGIN_M = 0.5
+FRONT_WALL_MIN_TOP_M = 4.57
 MAX_TILT_UP_RAD = np.deg2rad(15.0)
 MAX_TILT_DOWN_RAD = np.deg2rad(75.0)
 # Verification: sample spacing (m), distance tolerance (px at 1920 px wide) for ranking raw
@@ -530,7 +536,8 @@ def _placed_plausibly(
     court_size: np.ndarray,
 ) -> bool:
     """Whether a camera (X_cam = r X + t) stands where courts are filmed from: at a plausible
-    height and distance, and not where players play (see `in_play_volume`)."""
+    height and distance, not where players play and not behind the front wall (see
+    `implausible_placement`)."""
     cx = -(r[0, 0] * t[0] + r[1, 0] * t[1] + r[2, 0] * t[2])
     cy = -(r[0, 1] * t[0] + r[1, 1] * t[1] + r[2, 1] * t[2])
     cz = -(r[0, 2] * t[0] + r[1, 2] * t[1] + r[2, 2] * t[2])
@@ -538,7 +545,9 @@ def _placed_plausibly(
         return False
     if abs(cx - court_centre[0]) > max_distance or abs(cy - court_centre[1]) > max_distance:
         return False
-    return not _in_play_volume(cx, cy, cz, court_size[0], court_size[1])
+    return not (
+        _in_play_volume(cx, cy, cz, court_size[0], court_size[1]) or _behind_front_wall(cy, cz)
+    )
 
 
 @numba.njit(cache=True, inline="always")
@@ -555,16 +564,40 @@ def _in_play_volume(x: float, y: float, z: float, width_m: float, length_m: floa
     )
 
 
-def in_play_volume(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
-    """(N,) bool: the camera centre is where players play (no fixed camera stands there)."""
+@numba.njit(cache=True, inline="always")
+def _behind_front_wall(y: float, z: float) -> bool:
+    """Whether a point (court frame, z down) is behind the front wall and below its top."""
+    return y < -FRONT_WALL_MARGIN_M and z > -FRONT_WALL_MIN_TOP_M
+
+
+def _camera_centres(genomes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(K, 3) court-frame centres of the finite cameras among `genomes`, and which they are."""
     pop = camera.as_population(genomes)
     finite = np.all(np.isfinite(pop), axis=1)
     r, t = camera.court_extrinsics(pop[finite])
-    out = np.zeros(len(pop), dtype=bool)
-    out[finite] = _in_play_volume_all(
-        -np.einsum("nji,nj->ni", r, t), model.spec.width_m, model.spec.length_m
-    )
+    return -np.einsum("nji,nj->ni", r, t), finite
+
+
+def in_play_volume(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
+    """(N,) bool: the camera centre is where players play (no fixed camera stands there)."""
+    centres, finite = _camera_centres(genomes)
+    out = np.zeros(len(finite), dtype=bool)
+    out[finite] = _in_play_volume_all(centres, model.spec.width_m, model.spec.length_m)
     return out
+
+
+def behind_front_wall(genomes: np.ndarray) -> np.ndarray:
+    """(N,) bool: the camera stands behind the front wall, below its top (it sees no court)."""
+    centres, finite = _camera_centres(genomes)
+    out = np.zeros(len(finite), dtype=bool)
+    out[finite] = (centres[:, 1] < -FRONT_WALL_MARGIN_M) & (centres[:, 2] > -FRONT_WALL_MIN_TOP_M)
+    return out
+
+
+def implausible_placement(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
+    """(N,) bool: no fixed camera filming the court stands there (where players play, or behind
+    the front wall)."""
+    return in_play_volume(genomes, model) | behind_front_wall(genomes)
 
 
 @numba.njit(cache=True, nogil=True)
