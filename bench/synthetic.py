@@ -16,8 +16,9 @@ Per class it prints: found (accepted and right), refused, wrong cameras accepted
 that matters most: a wrong camera is worse than none) and among them those whose floor is off
 (median floor error over 5 cm; the others fail on the lines' RMS only), the verdicts, and the
 median floor error and time of the found ones; then the negatives accepted. Every case's figures
-go to a CSV in bench/out (the verdict's thresholds are calibrated on it: `--calibrate` prints the
-candidate thresholds' false-accept and false-reject rates).
+go to a CSV in bench/out: the verdict is a pure function of them (`quality.verdict`), so candidate
+thresholds can be re-judged on it without calibrating again (the second search a refusal starts
+is then not rerun).
 """
 
 from __future__ import annotations

@@ -103,6 +103,24 @@ def test_each_rule_refuses_with_its_reason(change, words):
     judged = quality.verdict(figures)
     assert judged.label == "not_a_court"
     assert any(words in reason for reason in judged.reasons), judged.reasons
+    assert len(judged.refused_by) == len(judged.reasons)
+
+
+@pytest.mark.parametrize(
+    ("change", "only_pinning"),
+    [
+        ({"floor_along_supported": 1.0}, True),
+        ({"floor_across_supported": 1.0, "floor_error_t_cm": 80.0}, True),
+        ({"floor_along_supported": 1.0, "wall_edges_supported": 0.0}, False),
+        ({"camera_behind_front_wall": 1.0}, False),
+        ({}, False),  # not refused at all
+    ],
+)
+def test_a_refusal_says_whether_only_the_pinning_rules_refused(change, only_pinning):
+    """The pipeline lets a sharper fit of the same court overturn a refusal for lines that do
+    not pin the floor, never one that doubts the court is a squash court."""
+    judged = quality.verdict({**_typical_right(), **change})
+    assert judged.refused_only_by(quality.PINNING_RULES) == only_pinning
 
 
 def test_a_camera_with_free_intrinsics_and_wall_lines_passes():

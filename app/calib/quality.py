@@ -95,6 +95,10 @@ MAX_FLOOR_ERROR_T_CM = 30.0
 GOOD_FLOOR_ERROR_T_CM = 8.0
 MAX_ABSENT_FRACTION = 0.6
 GOOD_ABSENT_FRACTION = 0.35
+# The rules (`verdict`'s names) that refuse a camera because the lines it finds do not pin it
+# down, not because what it finds might not be a squash court (no wall lines, support at chance,
+# where it stands, what it predicts and is absent): a sharper fit of the same court can pass them.
+PINNING_RULES = frozenset({"floor_directions", "floor_error"})
 
 
 def verdict_tolerance_px(image_width: int) -> float:
@@ -141,6 +145,12 @@ class Verdict:
     score: float  # 0..1, how convincing (support excess, scaled by pinning)
     reasons: list[str] = field(default_factory=list)
     figures: dict[str, float] = field(default_factory=dict)
+    # the rules that refused it (`verdict`'s names, e.g. "wall_lines"), for the pipeline
+    refused_by: tuple[str, ...] = ()
+
+    def refused_only_by(self, rules: frozenset[str]) -> bool:
+        """Whether it is refused, and by none but `rules`."""
+        return bool(self.refused_by) and set(self.refused_by) <= rules
 
     def to_json(self) -> dict[str, object]:
         return {
@@ -209,75 +219,93 @@ def free_intrinsics(figures: dict[str, float]) -> bool:
 def verdict(figures: dict[str, float]) -> Verdict:
     """good / check / not_a_court from the figures (see module doc), with reasons in words."""
     refusals: list[str] = []
+    refused_by: list[str] = []
+
+    def refuse(rule: str, reason: str) -> None:
+        refused_by.append(rule)
+        refusals.append(reason)
+
     doubts: list[str] = []
     across = figures["floor_across_supported"]
     along = figures["floor_along_supported"]
     if across < MIN_FLOOR_ACROSS or along < MIN_FLOOR_ALONG:
-        refusals.append(
+        refuse(
+            "floor_directions",
             f"the floor lines found ({across:.0f} across the court, {along:.0f} along it; need "
             f"{MIN_FLOOR_ACROSS} and {MIN_FLOOR_ALONG}) do not pin the floor down (film more of "
-            "the floor: the short line, the service boxes and a side wall's floor line)"
+            "the floor: the short line, the service boxes and a side wall's floor line)",
         )
     if figures["supported_edges"] < MIN_SUPPORTED_EDGES:
-        refusals.append(
+        refuse(
+            "supported_edges",
             f"only {figures['supported_edges']:.0f} court lines were found on the picture "
-            f"(need {MIN_SUPPORTED_EDGES})"
+            f"(need {MIN_SUPPORTED_EDGES})",
         )
     if figures["supported_share_of_edges"] < MIN_SUPPORTED_SHARE_OF_EDGES:
-        refusals.append(
+        refuse(
+            "supported_share",
             f"only {figures['supported_share_of_edges']:.0%} of the court lines this camera puts "
-            "in the picture are on the picture's lines"
+            "in the picture are on the picture's lines",
         )
     if figures["supported_share_of_reliable_edges"] < MIN_SUPPORTED_SHARE_OF_RELIABLE_EDGES:
-        refusals.append(
+        refuse(
+            "reliable_share",
             f"only {figures['supported_share_of_reliable_edges']:.0%} of the painted court lines "
-            "this camera puts in the picture are on the picture's lines"
+            "this camera puts in the picture are on the picture's lines",
         )
     if figures["wall_edges_supported"] < MIN_WALL_EDGES:
-        refusals.append(
+        refuse(
+            "wall_lines",
             "no line on the walls (tin, service line, out lines) was found where the camera puts "
-            "them: this may be another sport's court, or the walls are out of the picture"
+            "them: this may be another sport's court, or the walls are out of the picture",
         )
     elif free_intrinsics(figures) and figures["wall_edges_supported"] < (
         MIN_WALL_EDGES_FREE_INTRINSICS
     ):
-        refusals.append(
+        refuse(
+            "free_intrinsics_wall_lines",
             f"only {figures['wall_edges_supported']:.0f} of the court's wall lines were found "
             "for a camera with non-square pixels or an off-centre picture: such a camera can lay a "
             f"court on any grid of floor lines, so it needs {MIN_WALL_EDGES_FREE_INTRINSICS} "
-            "wall lines (tin, service line, out lines, corners) to tell a squash court"
+            "wall lines (tin, service line, out lines, corners) to tell a squash court",
         )
     if figures["support_excess"] < MIN_SUPPORT_EXCESS:
-        refusals.append(
+        refuse(
+            "support_excess",
             f"the court drawn by the best camera lies on line marks for "
             f"{figures['support_fraction']:.0%} of its length, against "
-            f"{figures['chance_fraction']:.0%} by chance"
+            f"{figures['chance_fraction']:.0%} by chance",
         )
     floor_t = figures.get("floor_error_t_cm", 0.0)
     if not np.isfinite(floor_t) or floor_t > MAX_FLOOR_ERROR_T_CM:
-        refusals.append(
+        refuse(
+            "floor_error",
             "the lines in view do not pin the camera down (expected floor error at the T "
-            f"{floor_t:.0f} cm)"
+            f"{floor_t:.0f} cm)",
         )
     if figures.get("floor_share", 1.0) < MIN_FLOOR_SHARE_OF_PICTURE:
-        refusals.append(
+        refuse(
+            "floor_share",
             f"the court's floor would fill only {figures['floor_share']:.0%} of the picture: "
-            "film the floor, where the players' feet are"
+            "film the floor, where the players' feet are",
         )
     if figures.get("camera_in_play_volume", 0.0) > 0.0:
-        refusals.append(
+        refuse(
+            "in_play_volume",
             "the camera would stand inside the court where the players play, which no fixed "
-            "camera does"
+            "camera does",
         )
     if figures.get("camera_behind_front_wall", 0.0) > 0.0:
-        refusals.append(
+        refuse(
+            "behind_front_wall",
             "the camera would stand behind the front wall, which is solid: it could not see the "
-            "court from there"
+            "court from there",
         )
     if figures["absent_fraction"] > MAX_ABSENT_FRACTION:
-        refusals.append(
+        refuse(
+            "absent_lines",
             f"{figures['absent_fraction']:.0%} of the court the camera predicts in the picture "
-            "has no line there"
+            "has no line there",
         )
     if not refusals:
         if figures["support_excess"] < GOOD_SUPPORT_EXCESS:
@@ -293,7 +321,7 @@ def verdict(figures: dict[str, float]) -> Verdict:
     pin = 1.0 / (1.0 + max(floor_t, 0.0) / GOOD_FLOOR_ERROR_T_CM) if np.isfinite(floor_t) else 0.0
     score = excess * (0.5 + 0.5 * pin)
     if refusals:
-        return Verdict("not_a_court", score, refusals, figures)
+        return Verdict("not_a_court", score, refusals, figures, tuple(refused_by))
     if doubts:
         return Verdict("check", score, doubts, figures)
     return Verdict("good", score, ["the court's lines in view lie on the picture's lines"], figures)

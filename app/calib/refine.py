@@ -13,7 +13,7 @@ with forward-difference Jacobians computed for all perturbed cameras in one comp
 
 Camera models (`MODELS`): one view of a court pins intrinsics weakly, so the default is square
 pixels, principal point at the image centre and one radial term; more terms (k2, a free aspect
-ratio, a free principal point) are added only when the evidence demands them: the fit must
+ratio, a free principal point, tangential p1 and p2) are added only when the evidence demands them: the fit must
 improve by more than BIC's penalty computed with an effective number of independent residuals
 (neighbouring samples along a line are not independent).
 """
@@ -194,6 +194,9 @@ EXTENSIONS: dict[str, tuple[tuple[tuple[str, ...], float], ...]] = {
     "k2": ((("k2",), 0.01),),
     "aspect": ((("f_v",), 10.0),),
     "centre": ((("c_u",), 5.0), (("c_v",), 5.0)),
+    # decentring (a lens element off the axis, common in phone and action-camera lenses): lines
+    # bend the other way on either side of the picture, which no radial term follows
+    "tangential": ((("p1",), 1e-3), (("p2",), 1e-3)),
 }
 
 
@@ -394,7 +397,7 @@ def select_model(
     maps: EvidenceMaps,
     image_width: int,
 ) -> Fit:
-    """Add model extensions (k2, aspect, centre) to the fit's own one at a time while BIC
+    """Add model extensions (k2, aspect, centre, tangential) to the fit's own one at a time while BIC
     improves. (Starting from none would freeze the terms the fit already has, e.g. a k2 that
     ranking the candidates chose, at their values.)"""
     best = base_fit
