@@ -8,6 +8,15 @@ from app.calib.court import court_model
 from bench.synthetic import FOUND_FLOOR_CM, FOUND_LINES_PX, camera_errors
 
 
+def _fit_inputs(case: cases.SyntheticCase):
+    """What the final fit of a rendered case works with: the picture's size, its evidence maps,
+    the court's fit samples and the pipeline's truncations."""
+    size = (case.image.shape[1], case.image.shape[0])
+    maps = lines.evidence_maps(pipeline.line_evidence_of(case.image))
+    samples = refine.fit_samples(court_model(case.spec), refine.spacing_for_width(size[0]))
+    return size, maps, samples, pipeline.refine_taus(size[0])
+
+
 def test_a_corner_view_stuck_a_few_pixels_off_is_freed_by_perturbed_starts() -> None:
     """bench.synthetic's corner_side 1006 (a low corner view, 960 x 540): one descent from the
     search's camera stopped with the court's lines 6.7 px RMS off (floor 2.2 cm); the best of the
@@ -111,11 +120,7 @@ def test_a_fit_whose_picture_edges_are_far_off_is_pulled_in_from_a_wide_truncati
     too far from their evidence to pull the fit (lines 7 px RMS off); refitted from a wide one,
     k2 returns near 0 and the lines within the benchmark's 2 px."""
     case = cases.make_case("club", 1000)
-    size = (case.image.shape[1], case.image.shape[0])
-    model = court_model(case.spec)
-    maps = lines.evidence_maps(pipeline.line_evidence_of(case.image))
-    samples = refine.fit_samples(model, refine.spacing_for_width(size[0]))
-    taus = pipeline.refine_taus(size[0])
+    size, maps, samples, taus = _fit_inputs(case)
     start = case.genome.copy()
     start[refine.GENE["k2"]] = 0.15
     start[refine.GENE["p1"] : refine.GENE["p2"] + 1] = 0.0  # the fit has no tangential terms
@@ -137,11 +142,7 @@ def test_a_decentred_lens_is_followed_by_the_tangential_terms() -> None:
     the true camera without them, the model selection adds them and the lines come within the
     benchmark's 2 px."""
     case = cases.make_case("club", 7007)
-    size = (case.image.shape[1], case.image.shape[0])
-    model = court_model(case.spec)
-    maps = lines.evidence_maps(pipeline.line_evidence_of(case.image))
-    samples = refine.fit_samples(model, refine.spacing_for_width(size[0]))
-    taus = pipeline.refine_taus(size[0])
+    size, maps, samples, taus = _fit_inputs(case)
     start = case.genome.copy()
     start[refine.GENE["p1"] : refine.GENE["p2"] + 1] = 0.0
     radial = refine.refine_coarse_to_fine(

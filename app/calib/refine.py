@@ -13,9 +13,9 @@ with forward-difference Jacobians computed for all perturbed cameras in one comp
 
 Camera models (`MODELS`): one view of a court pins intrinsics weakly, so the default is square
 pixels, principal point at the image centre and one radial term; more terms (k2, a free aspect
-ratio, a free principal point, tangential p1 and p2) are added only when the evidence demands them: the fit must
-improve by more than BIC's penalty computed with an effective number of independent residuals
-(neighbouring samples along a line are not independent).
+ratio, a free principal point, tangential p1 and p2) are added only when the evidence demands
+them: the fit must improve by more than BIC's penalty computed with an effective number of
+independent residuals (neighbouring samples along a line are not independent).
 """
 
 from __future__ import annotations
@@ -397,9 +397,9 @@ def select_model(
     maps: EvidenceMaps,
     image_width: int,
 ) -> Fit:
-    """Add model extensions (k2, aspect, centre, tangential) to the fit's own one at a time while BIC
-    improves. (Starting from none would freeze the terms the fit already has, e.g. a k2 that
-    ranking the candidates chose, at their values.)"""
+    """Add model extensions (k2, aspect, centre, tangential) to the fit's own one at a time
+    while BIC improves. (Starting from none would freeze the terms the fit already has, e.g. a
+    k2 that ranking the candidates chose, at their values.)"""
     best = base_fit
     n_eff = effective_samples(base_fit, samples, image_width)
     chosen = base_fit.model.extensions

@@ -23,6 +23,7 @@ evidence.
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -570,34 +571,44 @@ def _behind_front_wall(y: float, z: float) -> bool:
     return y < -FRONT_WALL_MARGIN_M and z > -FRONT_WALL_MIN_TOP_M
 
 
-def _camera_centres(genomes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(K, 3) court-frame centres of the finite cameras among `genomes`, and which they are."""
+def _placement_rule(genomes: np.ndarray, rule: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """(N,) bool: `rule` of the court-frame centres (K, 3) of the finite cameras among
+    `genomes` (False for the others)."""
     pop = camera.as_population(genomes)
     finite = np.all(np.isfinite(pop), axis=1)
     r, t = camera.court_extrinsics(pop[finite])
-    return -np.einsum("nji,nj->ni", r, t), finite
+    out = np.zeros(len(pop), dtype=bool)
+    out[finite] = rule(-np.einsum("nji,nj->ni", r, t))
+    return out
 
 
 def in_play_volume(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
     """(N,) bool: the camera centre is where players play (no fixed camera stands there)."""
-    centres, finite = _camera_centres(genomes)
-    out = np.zeros(len(finite), dtype=bool)
-    out[finite] = _in_play_volume_all(centres, model.spec.width_m, model.spec.length_m)
-    return out
+    spec = model.spec
+    return _placement_rule(genomes, lambda c: _in_play_volume_all(c, spec.width_m, spec.length_m))
 
 
 def behind_front_wall(genomes: np.ndarray) -> np.ndarray:
     """(N,) bool: the camera stands behind the front wall, below its top (it sees no court)."""
-    centres, finite = _camera_centres(genomes)
-    out = np.zeros(len(finite), dtype=bool)
-    out[finite] = (centres[:, 1] < -FRONT_WALL_MARGIN_M) & (centres[:, 2] > -FRONT_WALL_MIN_TOP_M)
-    return out
+    return _placement_rule(genomes, _behind_front_wall_all)
 
 
 def implausible_placement(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
     """(N,) bool: no fixed camera filming the court stands there (where players play, or behind
     the front wall)."""
-    return in_play_volume(genomes, model) | behind_front_wall(genomes)
+    spec = model.spec
+    return _placement_rule(
+        genomes,
+        lambda c: _in_play_volume_all(c, spec.width_m, spec.length_m) | _behind_front_wall_all(c),
+    )
+
+
+@numba.njit(cache=True, nogil=True)
+def _behind_front_wall_all(centres: np.ndarray) -> np.ndarray:
+    out = np.empty(centres.shape[0], dtype=np.bool_)
+    for i in range(centres.shape[0]):
+        out[i] = _behind_front_wall(centres[i, 1], centres[i, 2])
+    return out
 
 
 @numba.njit(cache=True, nogil=True)
