@@ -14,6 +14,10 @@ $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e '.[dev]'
+	# compile the numerical kernels into numba's on-disk cache once (~80 s on 2 cores), at install
+	# as issue 8 asks: otherwise the first calibration, the tests' first processes and the
+	# service's first warm-up each compile them, several at once on a fresh checkout
+	$(BIN)/python -m app.calib.warmup
 	touch $(STAMP)
 
 run: $(STAMP)
