@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from app.calib import camera, court, scene, scene_styles, synthetic
+from app.calib import camera, cases, court, scene, scene_styles, synthetic
 
 FULL_HD = (1920, 1080)
 
@@ -344,3 +344,36 @@ def test_scenes_render_deterministically():
     assert not np.array_equal(a, scene.render_scene(g, size, "wsf", style, 6))
     assert scene_styles.sample_style(7, "glass") == style
     assert scene_styles.sample_style(8, "glass") != style
+
+
+def _strong_barrel_camera(size: tuple[int, int]) -> np.ndarray:
+    """A wide-angle club camera (f 620 px, k1 -0.14, k2 0.01 at 1920 x 1080) behind the back
+    wall: its lens compresses the side walls almost to a fold (dr_d/dr 0.07 at r 2.1)."""
+    scale = size[0] / 1920
+    rotation, _ = cv2.Rodrigues(np.array([-0.8384, 0.0022, 0.0533]))
+    return cases.make_genome(
+        -rotation.T @ np.array([-2.772, -3.222, 11.222]),
+        rotation,
+        620.0 * scale,
+        620.0 * scale,
+        ((size[0] - 1) / 2, (size[1] - 1) / 2),
+        (-0.1438, 0.01, -0.0003, 0.0026, 0.0),
+    )
+
+
+@pytest.mark.parametrize("size", [(960, 540), (1920, 1080)])
+def test_the_ray_grid_follows_a_strong_barrel_lens_where_it_compresses_most(size):
+    g = _strong_barrel_camera(size)
+    coarse = scene.RAY_GRID_STEPS_PX[0]
+    # bilinear rays on the coarse grid stray off the lens model where the lens compresses
+    assert scene.ray_grid_error_px(g, size, coarse, scene.ray_grid(g, size, coarse)) > 0.5
+    ray_x, ray_y, ray_ok, step_px, _, _ = scene.camera_rays(g, size)
+    assert step_px < coarse
+    error_px = scene.ray_grid_error_px(g, size, step_px, (ray_x, ray_y, ray_ok))
+    assert error_px <= scene.RAY_GRID_MAX_ERROR_PX
+
+
+def test_a_mild_lens_keeps_the_coarse_ray_grid():
+    size = (1280, 720)
+    g = synthetic.typical_target_camera(size)
+    assert scene.camera_rays(g, size)[3] == scene.RAY_GRID_STEPS_PX[0]

@@ -39,7 +39,14 @@ from app.calib.camera import (
 from app.calib.court import PAINTED_EDGES, CourtModel, court_model, get_spec
 
 SUPERSAMPLING = 2  # 2 x 2 samples per pixel, box-filtered: anti-aliased edges
-UNDISTORT_GRID_STEP_PX = 8  # rays are exact on this grid and bilinear between (error < 0.01 px)
+# Rays are exact on a grid of pixel positions and bilinear between. An 8 px grid is exact enough
+# (< 0.01 px) for mild lenses, but where a strong barrel lens compresses the periphery most its
+# inverse bends faster than bilinear follows (k1 -0.14, f 620 px at 1080p: 1 px off at 8 px,
+# 0.07 px at 2 px), which drew wide-angle benchmark cases' side walls where the camera model does
+# not: the coarsest step whose worst error stays under RAY_GRID_MAX_ERROR_PX is used.
+RAY_GRID_STEPS_PX = (8, 4, 2, 1)
+RAY_GRID_MAX_ERROR_PX = 0.1
+RAY_GRID_ORIGIN_PX = -0.5
 SENSOR_NOISE_SIGMA = 1.5  # grey levels, per channel (render_court_image)
 TEXTURE_SIZE = 256
 PLAYER_HEIGHT_M = 1.8
@@ -505,30 +512,70 @@ class SceneLayers(NamedTuple):
     front_trans: np.ndarray  # (H, W) fraction of light from inside the court that gets through
 
 
-def camera_rays(
-    genome: np.ndarray, image_size: tuple[int, int]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Undistorted ray grid (x, y, ok on a coarse pixel grid), world-from-camera rotation, centre."""
+def ray_grid(
+    genome: np.ndarray, image_size: tuple[int, int], step_px: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Undistorted normalised rays (x, y, ok) on a pixel grid with `step_px` spacing from
+    RAY_GRID_ORIGIN_PX, one node beyond the picture on every side (rows v, columns u)."""
     width, height = image_size
     g = as_population(genome)[0]
-    step = float(UNDISTORT_GRID_STEP_PX)
-    us = -0.5 + step * np.arange(int(np.ceil(width / step)) + 2)
-    vs = -0.5 + step * np.arange(int(np.ceil(height / step)) + 2)
+    us = RAY_GRID_ORIGIN_PX + step_px * np.arange(int(np.ceil(width / step_px)) + 2)
+    vs = RAY_GRID_ORIGIN_PX + step_px * np.arange(int(np.ceil(height / step_px)) + 2)
     grid_u, grid_v = np.meshgrid(us, vs)
     with np.errstate(all="ignore"):
         ray_x, ray_y, ray_ok = undistort_normalized(
             (grid_u - g[2]) / g[0], (grid_v - g[3]) / g[1], g[DISTORTION_GENES]
         )
-    r, t = court_extrinsics(g)
+    return np.ascontiguousarray(ray_x), np.ascontiguousarray(ray_y), np.ascontiguousarray(ray_ok)
+
+
+def ray_grid_error_px(
+    genome: np.ndarray,
+    image_size: tuple[int, int],
+    step_px: int,
+    rays: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> float:
+    """Worst distance (px) between a grid cell's centre and where the camera model projects the
+    ray the renderer interpolates there (the mean of the cell's four corner rays); 0 when no
+    cell has four valid corners. Cell centres are where bilinear interpolation strays most."""
+    width, height = image_size
+    ray_x, ray_y, ray_ok = rays
+    ok = ray_ok[:-1, :-1] & ray_ok[1:, :-1] & ray_ok[:-1, 1:] & ray_ok[1:, 1:]
+    rows, cols = ok.shape
+    centre_u = RAY_GRID_ORIGIN_PX + step_px * (np.arange(cols) + 0.5)
+    centre_v = RAY_GRID_ORIGIN_PX + step_px * (np.arange(rows) + 0.5)
+    in_picture = (centre_v[:, None] < height) & (centre_u[None, :] < width)
+    keep = ok & in_picture
+    if not keep.any():
+        return 0.0
+
+    def cell_mean(a: np.ndarray) -> np.ndarray:
+        return 0.25 * (a[:-1, :-1] + a[1:, :-1] + a[:-1, 1:] + a[1:, 1:])[keep]
+
+    x, y = cell_mean(ray_x), cell_mean(ray_y)
+    r, t = court_extrinsics(genome)
+    r_world_from_cam = r[0].T
+    centre = -r_world_from_cam @ t[0]
+    # a point along each interpolated ray, projected by the one projection kernel
+    points = centre + np.stack([x, y, np.ones_like(x)], axis=1) @ r_world_from_cam.T
+    pixels, _ = project_points(genome, points)
+    grid_u, grid_v = np.meshgrid(centre_u, centre_v)
+    return float(np.hypot(pixels[:, 0] - grid_u[keep], pixels[:, 1] - grid_v[keep]).max())
+
+
+def camera_rays(
+    genome: np.ndarray, image_size: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, np.ndarray, np.ndarray]:
+    """The renderer's rays: (x, y, ok) on the coarsest RAY_GRID_STEPS_PX grid that follows the
+    lens within RAY_GRID_MAX_ERROR_PX, that grid's step, world-from-camera rotation, centre."""
+    for step_px in RAY_GRID_STEPS_PX:
+        rays = ray_grid(genome, image_size, step_px)
+        if ray_grid_error_px(genome, image_size, step_px, rays) <= RAY_GRID_MAX_ERROR_PX:
+            break
+    r, t = court_extrinsics(genome)
     r_world_from_cam = np.ascontiguousarray(r[0].T)
     centre = -r_world_from_cam @ t[0]
-    return (
-        np.ascontiguousarray(ray_x),
-        np.ascontiguousarray(ray_y),
-        np.ascontiguousarray(ray_ok),
-        r_world_from_cam,
-        centre,
-    )
+    return (*rays, step_px, r_world_from_cam, centre)
 
 
 def camera_centre(genome: np.ndarray) -> np.ndarray:
@@ -546,7 +593,7 @@ def render_layers(
 ) -> SceneLayers:
     """Ray-cast the style's scene through the camera: colour and the layers players need."""
     width, height = check_image_size(image_size)
-    ray_x, ray_y, ray_ok, r_world_from_cam, centre = camera_rays(genome, (width, height))
+    ray_x, ray_y, ray_ok, step_px, r_world_from_cam, centre = camera_rays(genome, (width, height))
     arrays = build_scene(style, spec, centre, rng)
     colour = np.zeros((height, width, 3), np.float32)
     front_acc = np.zeros((height, width, 3), np.float32)
@@ -556,8 +603,8 @@ def render_layers(
         ray_x,
         ray_y,
         ray_ok,
-        -0.5,
-        float(UNDISTORT_GRID_STEP_PX),
+        RAY_GRID_ORIGIN_PX,
+        float(step_px),
         SUPERSAMPLING,
         r_world_from_cam,
         centre,
