@@ -158,3 +158,22 @@ def test_other_sports_layouts_are_not_a_squash_court():
         assert not (abs(w - 6.4) < 0.3 and abs(length - 9.75) < 0.5)
         assert not (abs(w - 7.62) < 0.3 and abs(length - 9.75) < 0.5)
         assert len(lines) >= 5
+
+
+def test_a_strong_barrel_lens_gets_the_k2_that_makes_it_physical_to_the_picture_corners():
+    size = (1280, 720)
+    g = synthetic.typical_target_camera(size)
+    g[camera.GENE["f_u"]] = g[camera.GENE["f_v"]] = 0.9 * size[0]
+    g[camera.DISTORTION_GENES] = [-0.35, 0.0, 0.0, 0.0, 0.0]
+    # the picture's corners are rays at r = 0.79 (38 degrees off axis), well inside the fold
+    # (r = 0.98), but there d r_d / d r is 0.35, less than an orthographic lens keeps (0.49)
+    assert camera.lens_fold_radius(g) > 0.95
+    assert cases.lens_is_physical(g, 0.5)
+    assert not cases.lens_is_physical(g, 0.79)
+    assert not cases.lens_covers_image(g, size)
+    unfolded = cases.unfold_lens(g, size)
+    assert unfolded is not None and unfolded[camera.GENE["k2"]] > 0.0
+    assert cases.lens_covers_image(unfolded, size)
+    weaker = unfolded.copy()
+    weaker[camera.GENE["k2"]] -= 0.005
+    assert not cases.lens_covers_image(weaker, size)

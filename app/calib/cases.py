@@ -245,8 +245,24 @@ def _fold_safe_dist(
     )
 
 
+def lens_is_physical(genome: np.ndarray, max_radius: float) -> bool:
+    """True when the radial polynomial compresses no ray out to `max_radius` (undistorted,
+    normalised) more than an orthographic lens would: slope d r_d / d r >= cos^3 of the ray's
+    angle. Orthographic (image height f sin(angle)) is the strongest compression of the standard
+    projections (equidistant fisheye: cos^2); a polynomial that dips below it inside the picture
+    is nearly folded there, squeezes a band of angles into a few pixels and widens again beyond,
+    which no real lens does (seeds 7300+: the wide-angle, club and corner cases whose floor was
+    right but whose periphery lines were 3-17 px off had slopes of 0.001-0.12 there)."""
+    g = as_population(genome)[0]
+    k1, k2, k3 = g[DISTORTION_GENES][[0, 1, 4]]
+    r2 = np.linspace(0.0, max_radius, 400) ** 2
+    slope = 1.0 + 3.0 * k1 * r2 + 5.0 * k2 * r2**2 + 7.0 * k3 * r2**3
+    return bool(np.all(slope >= (1.0 + r2) ** -1.5))
+
+
 def lens_covers_image(genome: np.ndarray, size: tuple[int, int]) -> bool:
-    """True when every border pixel has a physical ray (inside the lens model's fold, with a margin)."""
+    """True when every border pixel has a physical ray (inside the lens model's fold, with a
+    margin) and the lens is physical out to the farthest of them (`lens_is_physical`)."""
     g = as_population(genome)[0]
     width, height = size
     u = np.concatenate([np.linspace(0, width - 1, 40), np.full(20, 0.0), np.full(20, width - 1.0)])
@@ -254,8 +270,9 @@ def lens_covers_image(genome: np.ndarray, size: tuple[int, int]) -> bool:
     u = np.concatenate([u, np.linspace(0, width - 1, 20)])
     v = np.concatenate([v, np.full(20, 0.0), np.full(20, height - 1.0)])[: len(u)]
     x, y, ok = undistort_normalized((u - g[2]) / g[0], (v - g[3]) / g[1], g[DISTORTION_GENES])
+    radius = np.hypot(x, y)
     fold = lens_fold_radius(g)
-    return bool(np.all(ok) and np.all(np.hypot(x, y) < 0.9 * fold))
+    return bool(np.all(ok) and np.all(radius < 0.9 * fold) and lens_is_physical(g, radius.max()))
 
 
 K2_STEPS = np.linspace(0.0, 0.3, 61)
@@ -263,8 +280,9 @@ K2_STEPS = np.linspace(0.0, 0.3, 61)
 
 def unfold_lens(genome: np.ndarray, size: tuple[int, int]) -> np.ndarray | None:
     """The camera with the smallest k2 >= its own (steps of 0.005 up to 0.3) that keeps the whole
-    picture inside the lens model's usable field, or None. A strong barrel k1 alone folds back
-    inside the corners of a wide picture; real wide lenses are fitted with a positive k2 too."""
+    picture inside the lens model's usable field with a physical lens (`lens_covers_image`), or
+    None. A strong barrel k1 alone folds back inside the corners of a wide picture, or squeezes
+    them more than any real lens; real wide lenses are fitted with a positive k2 too."""
     g = as_population(genome)[0]
     if lens_covers_image(g, size):
         return g
