@@ -126,8 +126,11 @@ def test_a_refusal_says_whether_only_the_pinning_rules_refused(change, only_pinn
 def test_a_camera_with_free_intrinsics_and_wall_lines_passes():
     figures = {**_typical_right(), "pixel_aspect": 0.75, "principal_point_offset_share": 0.3}
     assert quality.verdict({**figures, "wall_edges_supported": 3.0}).label == "good"
-    # square pixels at the centre need one wall line only
-    assert quality.verdict({**_typical_right(), "wall_edges_supported": 1.0}).label == "good"
+    # square pixels at the centre need one wall line only, but one alone asks for a look
+    one_wall_line = quality.verdict({**_typical_right(), "wall_edges_supported": 1.0})
+    assert one_wall_line.label == "check"
+    assert any("one line on the walls" in reason for reason in one_wall_line.reasons)
+    assert quality.verdict({**_typical_right(), "wall_edges_supported": 2.0}).label == "good"
 
 
 def test_doubtful_figures_ask_for_a_check():
