@@ -115,24 +115,31 @@ def test_a_candidate_with_non_square_pixels_is_refitted_and_named_with_its_aspec
 
 
 def test_a_fit_whose_picture_edges_are_far_off_is_pulled_in_from_a_wide_truncation() -> None:
-    """bench.synthetic's club 1000 (k1 = -0.056, k2 = 0) started with k2 = 0.15 (as a lens estimate's
-    second-order term can put it): at the tight truncation the lines at the picture's edge are
-    too far from their evidence to pull the fit (lines 7 px RMS off); refitted from a wide one,
-    k2 returns near 0 and the lines within the benchmark's 2 px."""
+    """bench.synthetic's club 1000 (k1 = -0.056, k2 = 0) started with k2 0.15-0.3 (as a lens
+    estimate's second-order term can put it): at the tight truncation some of these fits stay
+    with the lines at the picture's edge too far from their evidence to pull them (which ones
+    depends on the evidence to the last pixel: 0.15 did when this test was written, 0.25 does
+    with numpy 2.4.6 and OpenCV 5.1); refitted from a wide one, every fit's k2 returns near 0 and its lines within the
+    benchmark's 2 px, and the refit never raises the cost."""
     case = cases.make_case("club", 1000)
     size, maps, samples, taus = _fit_inputs(case)
-    start = case.genome.copy()
-    start[refine.GENE["k2"]] = 0.15
-    start[refine.GENE["p1"] : refine.GENE["p2"] + 1] = 0.0  # the fit has no tangential terms
-    fit = refine.refine_coarse_to_fine(start, samples, maps, taus[-1:], refine.model_with(("k2",)))
-    assert camera_errors(case.genome, fit.genome, case.spec, size)[1] > 2 * FOUND_LINES_PX
-    wide = refine.refit_from_wide(fit, samples, maps, taus)
-    assert wide.cost < fit.cost and wide.tau_px == fit.tau_px
-    assert abs(wide.genome[refine.GENE["k2"]]) < 0.02
-    floor_cm, lines_px = camera_errors(case.genome, wide.genome, case.spec, size)
-    assert floor_cm <= FOUND_FLOOR_CM and lines_px <= FOUND_LINES_PX, (floor_cm, lines_px)
-    # it never raises the cost
-    assert refine.refit_from_wide(wide, samples, maps, taus).cost <= wide.cost
+    stuck = 0
+    for k2 in (0.15, 0.2, 0.25, 0.3):
+        start = case.genome.copy()
+        start[refine.GENE["k2"]] = k2
+        start[refine.GENE["p1"] : refine.GENE["p2"] + 1] = 0.0  # the fit has no tangential terms
+        fit = refine.refine_coarse_to_fine(
+            start, samples, maps, taus[-1:], refine.model_with(("k2",))
+        )
+        stuck += camera_errors(case.genome, fit.genome, case.spec, size)[1] > 2 * FOUND_LINES_PX
+        wide = refine.refit_from_wide(fit, samples, maps, taus)
+        assert wide.cost <= fit.cost and wide.tau_px == fit.tau_px
+        assert abs(wide.genome[refine.GENE["k2"]]) < 0.02, k2
+        floor_cm, lines_px = camera_errors(case.genome, wide.genome, case.spec, size)
+        assert floor_cm <= FOUND_FLOOR_CM and lines_px <= FOUND_LINES_PX, (k2, floor_cm, lines_px)
+        assert refine.refit_from_wide(wide, samples, maps, taus).cost <= wide.cost
+    # the case is one the wide truncation is needed for
+    assert stuck >= 1
 
 
 def test_a_decentred_lens_is_followed_by_the_tangential_terms() -> None:
