@@ -60,6 +60,10 @@ class Settings(BaseSettings):
     # more uploads: one tenant cannot fill the queue (or the disk) for everyone.
     max_queued_jobs_per_tenant: int = Field(default=50, ge=1)
     queue_full_retry_after_s: int = Field(default=30, ge=1)
+    # ... and one with this many uploads in the last hour (whatever became of them) gets 429 with
+    # Retry-After until the oldest of them is an hour old: a client stuck in a retry loop, or a
+    # leaked key, cannot flood the workers and the disk.
+    max_uploads_per_hour_per_tenant: int = Field(default=240, ge=1)
 
     # Calibration run (None = the pipeline's own defaults)
     ga_time_budget_s: float | None = Field(default=None, gt=0)

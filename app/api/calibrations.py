@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+from datetime import timedelta
 from typing import Any
 
 from fastapi import APIRouter, Request
@@ -17,7 +19,7 @@ from app.api.errors import ApiError
 from app.api.routing import ApiRoute
 from app.api.serialize import calibration_out
 from app.db import repo
-from app.db.models import Calibration, Court, Job, new_id
+from app.db.models import Calibration, Court, Job, new_id, utcnow
 from app.media import probe
 from app.schemas import CalibrationOut, ErrorResponse, JobAccepted
 from app.settings import Settings
@@ -58,8 +60,11 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
 }
 
 
-def _refuse_if_queue_full(session: Session, tenant_id: str, settings: Settings) -> None:
-    """429 while the tenant already has its share of waiting jobs."""
+UPLOAD_RATE_WINDOW = timedelta(hours=1)
+
+
+def _refuse_if_over_limits(session: Session, tenant_id: str, settings: Settings) -> None:
+    """429 while the tenant already has its share of waiting jobs, or of uploads this hour."""
     if repo.count_queued_jobs(session, tenant_id) >= settings.max_queued_jobs_per_tenant:
         raise ApiError(
             429,
@@ -67,6 +72,18 @@ def _refuse_if_queue_full(session: Session, tenant_id: str, settings: Settings) 
             f"{settings.max_queued_jobs_per_tenant} of your calibrations are already waiting; "
             "upload again when some have run",
             headers={"Retry-After": str(settings.queue_full_retry_after_s)},
+        )
+    now = utcnow()
+    count, oldest = repo.uploads_since(session, tenant_id, now - UPLOAD_RATE_WINDOW)
+    if count >= settings.max_uploads_per_hour_per_tenant:
+        free_in_s = (oldest + UPLOAD_RATE_WINDOW - now).total_seconds() if oldest else 1.0
+        retry_after_s = max(1, math.ceil(free_in_s))
+        raise ApiError(
+            429,
+            "too_many_uploads",
+            f"{count} calibrations were uploaded with your key in the last hour, the most "
+            f"allowed; upload again in {retry_after_s} s",
+            headers={"Retry-After": str(retry_after_s)},
         )
 
 
@@ -86,7 +103,7 @@ async def upload_calibration(
     def owned_court_with_room_in_the_queue() -> Court:
         with state.sessions() as session:
             court = repo.get_owned(session, Court, tenant_id, court_id)
-            _refuse_if_queue_full(session, tenant_id, settings)
+            _refuse_if_over_limits(session, tenant_id, settings)
             return court
 
     # 404 or 429 before reading a byte of the body
@@ -104,7 +121,7 @@ async def upload_calibration(
 
         def commit_job() -> None:
             with state.sessions.begin() as session:
-                _refuse_if_queue_full(session, tenant_id, settings)  # others came in meanwhile
+                _refuse_if_over_limits(session, tenant_id, settings)  # others came in meanwhile
                 repo.new_job(
                     session,
                     job_id=job_id,

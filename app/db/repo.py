@@ -255,6 +255,16 @@ def count_queued_jobs(session: Session, tenant_id: str) -> int:
     )
 
 
+def uploads_since(session: Session, tenant_id: str, since: datetime) -> tuple[int, datetime | None]:
+    """(how many jobs the tenant created since `since`, when the oldest of them was created)."""
+    count, oldest = session.execute(
+        select(func.count(Job.id), func.min(Job.created_at)).where(
+            Job.tenant_id == tenant_id, Job.created_at >= since
+        )
+    ).one()
+    return int(count or 0), oldest
+
+
 def list_jobs(session: Session, tenant_id: str, court_id: str, limit: int) -> Sequence[Job]:
     """The court's most recent jobs, newest first."""
     court = get_owned(session, Court, tenant_id, court_id)

@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
+
+import sqlalchemy as sa
 
 from app.db import queue
 from app.db.migrate import upgrade_head
+from app.db.models import Job
 from app.db.session import make_engine
 from app.main import create_app
+from app.settings import Settings
 from tests.service.conftest import api_client, make_settings, new_key
 from tests.service.helpers import files, png_bytes
 from tests.service.test_api import assert_error, make_court
@@ -51,3 +56,43 @@ def test_the_openapi_document_lists_429_for_uploads(tmp_path: Path) -> None:
     with api_client(create_app(settings)) as client:
         spec = client.get("/openapi.json").json()
     assert "429" in spec["paths"]["/courts/{court_id}/calibrations"]["post"]["responses"]
+
+
+def test_too_many_uploads_in_an_hour_are_429_with_retry_after_for_that_tenant_only(
+    any_db_settings: Settings,
+) -> None:
+    """The upload rate counts every upload of the hour, whatever became of its job: a tenant
+    whose jobs have all left the queue is still refused, until the oldest is an hour old."""
+    settings = any_db_settings.model_copy(update={"max_uploads_per_hour_per_tenant": 2})
+    busy = {"Authorization": f"Bearer {new_key(settings, 'busy')}"}
+    other = {"Authorization": f"Bearer {new_key(settings, 'other')}"}
+    image = files(png_bytes(seed=2))
+    with api_client(create_app(settings)) as client:
+        court_id = make_court(client, busy)
+        for _ in range(2):
+            assert upload(client, busy, court_id, image).status_code == 202
+        engine = make_engine(settings)
+        try:  # the queue is empty again: only the rate refuses
+            while queue.claim(engine, "w", settings.lease_s) is not None:
+                pass
+        finally:
+            engine.dispose()
+        refused = upload(client, busy, court_id, image)
+        assert_error(refused, 429, "too_many_uploads")
+        assert 3590 <= int(refused.headers["retry-after"]) <= 3600
+        assert len(jobs_in_db(settings)) == 2 and len(stored_job_dirs(settings)) == 2
+
+        other_court = make_court(client, other)
+        assert upload(client, other, other_court, image).status_code == 202
+
+        # an hour after the first upload there is room for one more
+        engine = make_engine(settings)
+        try:
+            with engine.begin() as conn:
+                first = conn.scalar(sa.select(Job.id).order_by(Job.created_at).limit(1))
+                an_hour_ago = datetime.now(UTC) - timedelta(hours=1, seconds=1)
+                conn.execute(sa.update(Job).where(Job.id == first).values(created_at=an_hour_ago))
+        finally:
+            engine.dispose()
+        assert upload(client, busy, court_id, image).status_code == 202
+        assert_error(upload(client, busy, court_id, image), 429, "too_many_uploads")
