@@ -20,6 +20,7 @@ independent residuals (neighbouring samples along a line are not independent).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numba
@@ -391,32 +392,77 @@ def bic(fit: Fit, n_eff: float) -> float:
     return n * np.log(max(fit.cost, 1e-12)) + fit.model.n_params * np.log(n)
 
 
+# Below this the matched residuals' RMS is not taken as the evidence's noise scale (a fit on a
+# handful of samples can match them almost exactly).
+MIN_NOISE_PX = 0.25
+# The extensions that bend lines (the lens) and those that place them (the picture's geometry).
+LENS_EXTENSIONS = ("k2", "tangential")
+
+
+def robust_bic(fit: Fit, n_samples: int, discount: float, noise_px: float, n_eff: float) -> float:
+    """BIC under the likelihood the robust cost stands for: matched residuals Gaussian with the
+    evidence's noise scale, the rest outliers at the truncation's constant, so -2 log L =
+    sum(rho(r)) / noise^2, discounted for correlation along lines."""
+    data = discount * n_samples * fit.cost * (fit.tau_px / noise_px) ** 2
+    return data + fit.model.n_params * np.log(max(n_eff, fit.model.n_params + 2.0))
+
+
+def _add_extensions(
+    best: Fit,
+    names: tuple[str, ...],
+    score: Callable[[Fit], float],
+    samples: FitSamples,
+    maps: EvidenceMaps,
+) -> Fit:
+    """Add `names` to `best`'s model one at a time, the best-scoring first, while `score` falls."""
+    remaining = [name for name in names if name not in best.model.extensions]
+    while remaining:
+        trials = []
+        for name in remaining:
+            model = model_with((*best.model.extensions, name))
+            fit = refine(best.genome, samples, maps, best.tau_px, model)
+            trials.append((score(fit), name, fit))
+        value, name, fit = min(trials, key=lambda item: item[0])
+        if value >= score(best):
+            break
+        best = fit
+        remaining.remove(name)
+    return best
+
+
 def select_model(
     base_fit: Fit,
     samples: FitSamples,
     maps: EvidenceMaps,
     image_width: int,
 ) -> Fit:
-    """Add model extensions (k2, aspect, centre, tangential) to the fit's own one at a time
-    while BIC improves. (Starting from none would freeze the terms the fit already has, e.g. a
-    k2 that ranking the candidates chose, at their values.)"""
-    best = base_fit
+    """Add model extensions to the fit's own: first the lens's (k2, tangential), then the
+    picture's (aspect, centre), each while its criterion improves. (Starting from none would
+    freeze the terms the fit already has, e.g. a k2 that ranking the candidates chose, at their
+    values.)
+
+    A lens term is judged by the robust likelihood (BIC with the cost as a Gaussian residual
+    sum is diluted by the outliers' constant share of the cost: bench.synthetic's wide_angle
+    1002 kept its picture's corners 2.3 px off without tangential terms that lowered the cost
+    2.5 %). It bends lines, which a court whose lines lie centimetres off the standard does not
+    do. The aspect and the principal point only move lines, and on a real court what they gain
+    is mostly the court's own deviations from the standard: judged by the robust likelihood too,
+    they were freed on real courts and on the paper's pinhole render, and moved the annotated
+    points 0.5-2 px further off (a real club court's median 0.9 -> 3.1 px); they keep the
+    stricter criterion. Cross-validation over held-out lines freed them on real courts as well."""
     n_eff = effective_samples(base_fit, samples, image_width)
-    chosen = base_fit.model.extensions
-    remaining = [name for name in EXTENSIONS if name not in chosen]
-    while remaining:
-        trials = []
-        for name in remaining:
-            candidate_model = model_with((*chosen, name))
-            fit = refine(best.genome, samples, maps, best.tau_px, candidate_model)
-            trials.append((bic(fit, n_eff), name, fit))
-        score, name, fit = min(trials, key=lambda item: item[0])
-        if score >= bic(best, n_eff):
-            break
-        best = fit
-        chosen = (*chosen, name)
-        remaining.remove(name)
-    return best
+    discount = n_eff / max(base_fit.matched, 1)
+    noise_px = max(base_fit.rms_px, MIN_NOISE_PX)
+    n_samples = len(samples.points)
+    lens = _add_extensions(
+        base_fit,
+        LENS_EXTENSIONS,
+        lambda fit: robust_bic(fit, n_samples, discount, noise_px, n_eff),
+        samples,
+        maps,
+    )
+    picture = tuple(name for name in EXTENSIONS if name not in LENS_EXTENSIONS)
+    return _add_extensions(lens, picture, lambda fit: bic(fit, n_eff), samples, maps)
 
 
 def parameter_covariance(fit: Fit, samples: FitSamples, image_width: int) -> np.ndarray:
