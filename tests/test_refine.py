@@ -17,6 +17,19 @@ def _fit_inputs(case: cases.SyntheticCase):
     return size, maps, samples, pipeline.refine_taus(size[0])
 
 
+def _radial_fit_from_truth(case: cases.SyntheticCase):
+    """`_fit_inputs` and the final fit from the true camera with its tangential terms zeroed and
+    only the radial ones free (k1, k2), which leaves the case's lines over the benchmark's 2 px."""
+    size, maps, samples, taus = _fit_inputs(case)
+    start = case.genome.copy()
+    start[refine.GENE["p1"] : refine.GENE["p2"] + 1] = 0.0
+    radial = refine.refine_coarse_to_fine(
+        start, samples, maps, taus[-1:], refine.model_with(("k2",))
+    )
+    assert camera_errors(case.genome, radial.genome, case.spec, size)[1] > FOUND_LINES_PX
+    return size, maps, samples, taus, radial
+
+
 def test_a_corner_view_stuck_a_few_pixels_off_is_freed_by_perturbed_starts() -> None:
     """bench.synthetic's corner_side 1006 (a low corner view, 960 x 540): one descent from the
     search's camera stopped with the court's lines 6.7 px RMS off (floor 2.2 cm); the best of the
@@ -149,13 +162,7 @@ def test_a_decentred_lens_is_followed_by_the_tangential_terms() -> None:
     the true camera without them, the model selection adds them and the lines come within the
     benchmark's 2 px."""
     case = cases.make_case("club", 7007)
-    size, maps, samples, taus = _fit_inputs(case)
-    start = case.genome.copy()
-    start[refine.GENE["p1"] : refine.GENE["p2"] + 1] = 0.0
-    radial = refine.refine_coarse_to_fine(
-        start, samples, maps, taus[-1:], refine.model_with(("k2",))
-    )
-    assert camera_errors(case.genome, radial.genome, case.spec, size)[1] > FOUND_LINES_PX
+    size, maps, samples, taus, radial = _radial_fit_from_truth(case)
     selected = refine.select_model(radial, samples, maps, size[0])
     assert "tangential" in selected.model.extensions
     p2 = selected.genome[refine.GENE["p2"]]
@@ -173,13 +180,7 @@ def test_model_selection_counts_a_cost_drop_by_the_robust_likelihood() -> None:
     cost stands for, they do, and refitted from a wide truncation as the pipeline does, the
     lines come within 2 px."""
     case = cases.make_case("wide_angle", 1002)
-    size, maps, samples, taus = _fit_inputs(case)
-    start = case.genome.copy()
-    start[refine.GENE["p1"] : refine.GENE["p2"] + 1] = 0.0
-    radial = refine.refine_coarse_to_fine(
-        start, samples, maps, taus[-1:], refine.model_with(("k2",))
-    )
-    assert camera_errors(case.genome, radial.genome, case.spec, size)[1] > FOUND_LINES_PX
+    size, maps, samples, taus, radial = _radial_fit_from_truth(case)
     selected = refine.select_model(radial, samples, maps, size[0])
     assert "tangential" in selected.model.extensions
     final = refine.refit_from_wide(selected, samples, maps, taus)
