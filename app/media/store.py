@@ -1,6 +1,6 @@
 """Where media lives: one interface for the API and the worker, a local directory by default.
 
-Layout under the store's root (`settings.media_dir`, i.e. SQUASHCAL_MEDIA_DIR or
+Layout under the store's root (`settings.media_dir`, i.e. SQUASHCAL_MEDIA_ROOT or
 `<data_dir>/media`):
 
     jobs/<job id>/<n>.<ext>                      an upload, as received (kept while the job lives)
