@@ -145,7 +145,8 @@ def postgres_schema() -> Iterator[str]:
             pytest.fail(reason)
         pytest.skip(reason)
     schema = f"squashcal_test_{uuid.uuid4().hex[:12]}"
-    admin = sa.create_engine(POSTGRES_ADMIN_URL)
+    # pre-ping: a test may restart the server, and the schema must still be dropped afterwards
+    admin = sa.create_engine(POSTGRES_ADMIN_URL, pool_pre_ping=True)
     with admin.begin() as conn:
         conn.execute(sa.text(f'CREATE SCHEMA "{schema}"'))
     try:
