@@ -2,16 +2,18 @@
 
 For every `NAME.json` in DATA_DIR (format: DATA_DIR/KEYPOINTS.md) with its image, this runs
 `pipeline.calibrate` from no start camera (the product's path: line evidence, search, polish,
-verdict; the pipeline is deterministic). An annotation with a `media` clip is calibrated from the
-clip as an upload is: its background (and moving mask) come from the worker's background stage
-(`background_from_clip`, the service's default settings), not from the annotated still and, with `--hint`, once more with the annotation's
+verdict; the pipeline is deterministic) and, with `--hint`, once more with the annotation's
 `check_fit` camera given as a start hint (how far the evidence pulls a camera off the
 hand-fitted one). It prints, per run, the verdict, the floor error (cm) of the annotated floor
 keypoints (their pixels mapped to the floor through the calibrated camera, against their court
 positions), the reprojection error (px) of all annotated keypoints, the floor error at the T the
 calibration itself reports (one standard deviation), the camera model chosen and the wall time.
-The `check_fit` camera's own numbers are the limit (it was fitted to these points). A refused
-calibration (CourtNotFound) shows the numbers of the camera it refused. The verdict's figures
+An annotation with a `media` clip is calibrated from the clip as an upload is: its background
+and moving mask come from the worker's background stage (`worker.main.clip_background`, the
+service's default settings), not from the annotated still; that stage runs once per annotation
+and its time is printed on a line of its own, apart from each run's. The `check_fit` camera's
+own numbers are the limit (it was fitted to these points). A refused calibration (CourtNotFound)
+shows the numbers of the camera it refused. The verdict's figures
 of every no-start run go to a CSV in bench/out (the verdict is a pure function of them).
 
 A camera is counted RIGHT when its median floor error is at most RIGHT_FLOOR_CM; the summary
@@ -37,10 +39,10 @@ import cv2
 import numpy as np
 
 from app.calib import camera, pipeline
-from app.calib.background import background_from_clip
 from app.calib.court import court_model
 from app.settings import Settings
 from bench.common import out_path
+from worker.main import clip_background
 
 
 @dataclass(frozen=True)
@@ -58,12 +60,7 @@ def calibration_input(ann: Annotation) -> tuple[np.ndarray, np.ndarray | None, s
     """(picture, moving mask or None, what it is) as the worker would hand them to the pipeline."""
     if ann.media is None:
         return ann.image, None, ""
-    settings = Settings()
-    background, moving_mask, info = background_from_clip(
-        ann.media,
-        n_frames=settings.background_frames,
-        max_duration_s=settings.max_video_duration_s,
-    )
+    background, moving_mask, info = clip_background(ann.media, Settings())
     ranges = ", ".join(f"{a:g}-{b:g}" for a, b in info["time_ranges_s"])
     described = f"clip: {info['shots']} shots, background from {ranges} s"
     return background, (moving_mask if np.any(moving_mask) else None), described
@@ -148,11 +145,12 @@ def run(data_dir: Path, with_hint: bool) -> None:
             f"{_stats(reproj_px)} | {len(floor_cm)} floor / {len(reproj_px)} keypoints"
         )
         runs = [("no start", None)] + ([("hint", ann.check_fit)] if with_hint else [])
+        t0 = time.perf_counter()
+        picture, moving_mask, described = calibration_input(ann)
+        if described:
+            print(f"{ann.name:<20} {'':<9} {described} ({time.perf_counter() - t0:.1f} s)")
         for label, start in runs:
             t0 = time.perf_counter()
-            picture, moving_mask, described = calibration_input(ann)
-            if described:
-                print(f"{ann.name:<20} {label:<9} {described} ({time.perf_counter() - t0:.1f} s)")
             try:
                 result = pipeline.calibrate(picture, start_genome=start, moving_mask=moving_mask)
             except pipeline.CourtNotFound as exc:

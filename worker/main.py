@@ -23,6 +23,7 @@ import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, TypeVar
 
 import cv2
@@ -303,6 +304,16 @@ def process_job(
             shutil.rmtree(cal_dir, ignore_errors=True)
 
 
+def clip_background(
+    path: Path, settings: Settings
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """A clip's background stage as a job runs it (`background_from_clip` with the service's
+    settings); raises ClipError."""
+    return background_from_clip(
+        path, n_frames=settings.background_frames, max_duration_s=settings.max_video_duration_s
+    )
+
+
 def _background(
     settings: Settings, job: queue.ClaimedJob
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
@@ -319,11 +330,7 @@ def _background(
                 "media_missing", f"the uploaded file is missing from storage: {path.name}"
             )
         try:
-            return background_from_clip(
-                path,
-                n_frames=settings.background_frames,
-                max_duration_s=settings.max_video_duration_s,
-            )
+            return clip_background(path, settings)
         except ClipError as exc:
             raise MediaError(exc.code, str(exc)) from exc
     paths = job_paths(settings, job.id, job.media_files)
