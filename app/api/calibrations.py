@@ -76,8 +76,8 @@ def _refuse_if_over_limits(session: Session, tenant_id: str, settings: Settings)
     now = utcnow()
     count, oldest = repo.uploads_since(session, tenant_id, now - UPLOAD_RATE_WINDOW)
     if count >= settings.max_uploads_per_hour_per_tenant:
-        free_in_s = (oldest + UPLOAD_RATE_WINDOW - now).total_seconds() if oldest else 1.0
-        retry_after_s = max(1, math.ceil(free_in_s))
+        assert oldest is not None  # the window holds at least one upload
+        retry_after_s = max(1, math.ceil((oldest + UPLOAD_RATE_WINDOW - now).total_seconds()))
         raise ApiError(
             429,
             "too_many_uploads",
