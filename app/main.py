@@ -19,6 +19,7 @@ from app.api.deps import AppState
 from app.api.errors import install_error_handlers
 from app.api.openapi import install_openapi
 from app.api.security_headers import SecurityHeadersMiddleware
+from app.api.unread_body import CloseOnUnreadBodyMiddleware
 from app.db import repo
 from app.db.migrate import head_revision
 from app.db.session import make_engine, make_sessionmaker
@@ -103,6 +104,8 @@ def create_app(settings: Settings | None = None, warm_up: bool = False) -> FastA
     install_error_handlers(app)
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_json_body_bytes)
     app.add_middleware(SecurityHeadersMiddleware)
+    # outermost: it must see the body as the server delivers it, and every response's headers
+    app.add_middleware(CloseOnUnreadBodyMiddleware)
     app.include_router(api_router)
     install_openapi(app, component_schemas())
     return app

@@ -41,7 +41,13 @@ class ErrorResponse(BaseModel):
 
 
 class CourtCreate(StrictModel):
-    name: str = Field(min_length=1, max_length=200)
+    # no NUL character: PostgreSQL cannot store one in text (SQLite would, and answer differently)
+    name: str = Field(
+        min_length=1,
+        max_length=200,
+        pattern=r"^[^\x00]*$",
+        description="1 to 200 characters, any but NUL (U+0000)",
+    )
     spec: CourtSpecName = Field(
         default="wsf", description="court specification: wsf, psa or doubles"
     )

@@ -168,6 +168,9 @@ class KeyLookup:
 
 def get_owned(session: Session, model: type[Owned], tenant_id: str, resource_id: str) -> Owned:
     """The one tenant-scoped read: the row if it exists AND belongs to `tenant_id`, else NotFound."""
+    if "\x00" in resource_id:
+        # no id has one (they are generated hex), and PostgreSQL fails any query sent a NUL
+        raise NotFound(model.__name__.lower(), resource_id)
     row = session.scalar(select(model).where(model.id == resource_id, model.tenant_id == tenant_id))
     if row is None:
         raise NotFound(model.__name__.lower(), resource_id)

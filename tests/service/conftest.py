@@ -1,5 +1,8 @@
 """Fixtures for the service tests: a migrated temporary database and an in-process API client.
 
+The database is a SQLite file of the test's own, and also (marked `postgres`) a throwaway
+PostgreSQL schema for the tests marked `both_databases` (see `pytest_generate_tests`).
+
 The client drives the real ASGI app (with its lifespan, so the camera cache refresher runs) on an
 event loop in a background thread, through httpx's ASGI transport, behind a plain synchronous
 httpx.Client.
@@ -11,7 +14,7 @@ import asyncio
 import contextlib
 import os
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import httpx
@@ -80,11 +83,26 @@ def make_settings(data_dir: Path, **overrides: object) -> Settings:
     return Settings(data_dir=data_dir, **overrides)  # type: ignore[arg-type]
 
 
-@pytest.fixture
-def settings(tmp_path: Path) -> Settings:
-    s = make_settings(tmp_path / "data", camera_refresh_s=0.05)
+def migrated_settings(data_dir: Path, database_url: str | None, **overrides: object) -> Settings:
+    """Settings on `database_url` (None: SQLite in `data_dir`), migrated to the head."""
+    s = make_settings(data_dir, database_url=database_url, **overrides)
     upgrade_head(s)
     return s
+
+
+@pytest.fixture
+def new_settings(tmp_path: Path, database_url: str | None) -> Callable[..., Settings]:
+    """Migrated settings with the test's own overrides, on the test's database (`backend`)."""
+
+    def make(**overrides: object) -> Settings:
+        return migrated_settings(tmp_path / "data", database_url, **overrides)
+
+    return make
+
+
+@pytest.fixture
+def settings(new_settings: Callable[..., Settings]) -> Settings:
+    return new_settings(camera_refresh_s=0.05)
 
 
 @pytest.fixture
@@ -157,18 +175,48 @@ def postgres_schema() -> Iterator[str]:
         admin.dispose()
 
 
-@pytest.fixture(params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
-def any_db_settings(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Settings]:
-    """Migrated settings on SQLite and (marked `postgres`) on a throwaway PostgreSQL schema."""
-    if request.param == "sqlite":
-        s = make_settings(tmp_path / "data")
-        upgrade_head(s)
-        yield s
+@contextlib.contextmanager
+def database_url_for(backend: str) -> Iterator[str | None]:
+    """None for SQLite (a file in the data dir), else a throwaway PostgreSQL schema's URL."""
+    if backend == "sqlite":
+        yield None
         return
     with postgres_schema() as url:
-        s = make_settings(tmp_path / "data", database_url=url)
-        upgrade_head(s)
-        yield s
+        yield url
+
+
+BACKENDS = ["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)]
+
+
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
+    # issue 8: the API, queue and worker suites hold on both databases. A test (or a module, by
+    # `pytestmark`) marked `both_databases` runs once per backend when it uses a database through
+    # these fixtures; other tests stay on SQLite, and tests without a database run once.
+    if "backend" in metafunc.fixturenames and metafunc.definition.get_closest_marker(
+        "both_databases"
+    ):
+        metafunc.parametrize("backend", BACKENDS, indirect=True)
+
+
+@pytest.fixture(scope="module")
+def backend(request: pytest.FixtureRequest) -> str:
+    """The test's database backend: SQLite unless the test is marked `both_databases`.
+    Module-scoped, so that a module's shared fixtures (test_page_api's calibration) can use it."""
+    return str(getattr(request, "param", "sqlite"))
+
+
+@pytest.fixture
+def database_url(backend: str) -> Iterator[str | None]:
+    """The test's own database: a fresh SQLite file or PostgreSQL schema, see `database_url_for`."""
+    with database_url_for(backend) as url:
+        yield url
+
+
+@pytest.fixture(params=BACKENDS)
+def any_db_settings(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Settings]:
+    """Migrated settings on SQLite and (marked `postgres`) on a throwaway PostgreSQL schema."""
+    with database_url_for(request.param) as url:
+        yield migrated_settings(tmp_path / "data", url)
 
 
 @pytest.fixture

@@ -12,6 +12,8 @@ from app.main import create_app
 from app.settings import Settings
 from tests.service.conftest import api_client, make_settings, new_key
 
+pytestmark = pytest.mark.both_databases
+
 
 def assert_error(response: httpx.Response, status: int, code: str | None = None) -> None:
     assert response.status_code == status, response.text
@@ -37,8 +39,8 @@ def test_health_and_ready(client: httpx.Client, settings: Settings) -> None:
     assert ready.json()["revision"] == head_revision(settings)
 
 
-def test_ready_fails_before_migrations(tmp_path) -> None:
-    settings = make_settings(tmp_path / "fresh")
+def test_ready_fails_before_migrations(tmp_path, database_url: str | None) -> None:
+    settings = make_settings(tmp_path / "fresh", database_url=database_url)
     with api_client(create_app(settings)) as client:
         assert client.get("/healthz").status_code == 200
         assert_error(client.get("/readyz"), 503, "migrations_pending")
@@ -190,6 +192,19 @@ def test_project_rejects_more_than_100000_points(
     court_id = make_court(client, auth)
     body = {"court_id": court_id, "pixels": [[1.0, 2.0]] * 100_001}
     assert_error(client.post("/project", json=body, headers=auth), 422)
+
+
+def test_an_answer_before_the_body_was_read_closes_the_connection(
+    client: httpx.Client, auth: dict[str, str]
+) -> None:
+    # otherwise the server reads the rest of a refused body to discard it (test_live_uploads)
+    response = client.post("/courts/nope/calibrations", files=[("files", ("a", b"x" * 999))])
+    assert_error(response, 401)
+    assert response.headers["connection"] == "close"
+    # a body read to its end, or none: the connection is kept for the next request
+    created = client.post("/courts", json={"name": "kept"}, headers=auth)
+    assert created.status_code == 201 and "connection" not in created.headers
+    assert "connection" not in client.get("/courts", headers=auth).headers
 
 
 def test_openapi_documents_the_api(client: httpx.Client) -> None:

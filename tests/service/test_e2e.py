@@ -46,7 +46,8 @@ class LiveService:
             "SQUASHCAL_POLL_INTERVAL_S": "0.2",
             "SQUASHCAL_PROGRESS_INTERVAL_S": "0.2",
             "SQUASHCAL_CAMERA_REFRESH_S": "0.2",
-            **{f"SQUASHCAL_{k.upper()}": str(v) for k, v in settings.items()},
+            # (None: the setting's default, e.g. database_url=None for SQLite in data_dir)
+            **{f"SQUASHCAL_{k.upper()}": str(v) for k, v in settings.items() if v is not None},
         }
         self.processes: list[subprocess.Popen[bytes]] = []
         self.logs: list = []

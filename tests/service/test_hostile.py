@@ -18,11 +18,10 @@ import pytest
 
 from app.calib import camera, synthetic
 from app.db import repo
-from app.db.migrate import upgrade_head
 from app.db.session import make_engine, make_sessionmaker
 from app.main import create_app
 from app.settings import Settings
-from tests.service.conftest import api_client, make_settings, new_key
+from tests.service.conftest import api_client, new_key
 from tests.service.helpers import files, jpeg_bytes, png_bytes, video_bytes
 from tests.service.test_api import assert_error, make_court
 from tests.service.test_camera_cache import SIZE, calibrate_directly, setup_court
@@ -31,6 +30,8 @@ from tests.service.test_uploads import jobs_in_db, png_with_header_size, stored_
 MAX_UPLOAD_BYTES = 2_000_000
 MAX_JSON_BODY_BYTES = 4_000_000
 MAX_IMAGES_BY_PIXELS = 3  # the corpus's pixel budget: three 64x48 images
+
+pytestmark = pytest.mark.both_databases
 
 
 @dataclass
@@ -63,15 +64,12 @@ class Target:
 
 
 @pytest.fixture
-def hostile_settings(tmp_path: Path) -> Settings:
-    settings = make_settings(
-        tmp_path / "data",
+def hostile_settings(new_settings: Callable[..., Settings]) -> Settings:
+    return new_settings(
         max_upload_bytes=MAX_UPLOAD_BYTES,
         max_json_body_bytes=MAX_JSON_BODY_BYTES,
         max_upload_pixels=MAX_IMAGES_BY_PIXELS * 64 * 48,
     )
-    upgrade_head(settings)
-    return settings
 
 
 @pytest.fixture
@@ -368,6 +366,26 @@ def _court_with_unknown_spec(t: Target) -> httpx.Response:
     return t.client.post("/courts", json={"name": "x", "spec": "tennis"}, headers=t.auth)
 
 
+# PostgreSQL refuses a NUL character in any text it is sent, where SQLite stores it: both must
+# answer these alike, and neither with a 500
+def _court_name_with_nul(t: Target) -> httpx.Response:
+    return t.client.post("/courts", json={"name": "a\u0000b"}, headers=t.auth)
+
+
+def _nul_in_a_court_id(t: Target) -> httpx.Response:
+    return t.client.get(f"/courts/{t.court_id}%00", headers=t.auth)
+
+
+def _nul_in_a_job_id(t: Target) -> httpx.Response:
+    return t.client.get("/jobs/a%00b", headers=t.auth)
+
+
+def _project_nul_in_the_court_id(t: Target) -> httpx.Response:
+    return t.client.post(
+        "/project", json={"court_id": f"{t.court_id}\u0000", "pixels": [[1, 2]]}, headers=t.auth
+    )
+
+
 def _missing_key(t: Target) -> httpx.Response:
     return t.client.get("/courts")
 
@@ -460,6 +478,7 @@ CORPUS = [
     Case("image-points NaN", _image_points_nan, 422, "invalid_request"),
     Case("court with empty name", _court_with_empty_name, 422, "invalid_request"),
     Case("court with unknown spec", _court_with_unknown_spec, 422, "invalid_request"),
+    Case("court name with a NUL character", _court_name_with_nul, 422, "invalid_request"),
     # ids
     Case("/project unknown court", _project_unknown_court, 404, "court_not_found"),
     Case("/project other tenant's court", _project_other_tenants_court, 404, "court_not_found"),
@@ -467,6 +486,9 @@ CORPUS = [
     Case("other tenant's court", _other_tenants_court, 404, "court_not_found"),
     Case("unknown job", _unknown_job, 404, "job_not_found"),
     Case("path tricks in a calibration id", _unknown_calibration, 404, "not_found"),
+    Case("NUL in a court id", _nul_in_a_court_id, 404, "court_not_found"),
+    Case("NUL in a job id", _nul_in_a_job_id, 404, "job_not_found"),
+    Case("/project NUL in the court id", _project_nul_in_the_court_id, 404, "court_not_found"),
     # keys
     Case("missing key", _missing_key, 401, "unauthorized"),
     Case("empty bearer key", _malformed_key, 401, "unauthorized"),
@@ -506,11 +528,9 @@ def test_client_file_names_never_reach_the_filesystem(
     assert stray == [folder / "000.png"]
 
 
-def test_image_points_beyond_the_lens_fold_are_not_in_the_image(tmp_path: Path) -> None:
+def test_image_points_beyond_the_lens_fold_are_not_in_the_image(settings: Settings) -> None:
     """A strong barrel lens folds back past ~47 degrees off-axis: floor points out there have
     ghost pixels inside the picture; the API must not report them as seen."""
-    settings = make_settings(tmp_path / "data")
-    upgrade_head(settings)
     key, tenant_id, court_id = setup_court(settings)
     genome = synthetic.typical_target_camera(SIZE).copy()
     genome[camera.GENE["k1"]], genome[camera.GENE["k2"]], genome[camera.GENE["k3"]] = -0.3, 0, 0

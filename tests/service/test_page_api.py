@@ -17,16 +17,17 @@ import numpy as np
 import pytest
 
 from app.calib import camera
-from app.db.migrate import upgrade_head
 from app.main import create_app
 from app.settings import Settings
 from tests import renderer
-from tests.service.conftest import api_client, make_settings, new_key
+from tests.service.conftest import api_client, database_url_for, migrated_settings, new_key
 from tests.service.helpers import court_clip_bytes, files
 from tests.service.test_api import assert_error
 from tests.service.test_worker import run_one_job
 
 SIZE = (960, 540)
+
+pytestmark = pytest.mark.both_databases
 
 
 @dataclass
@@ -40,22 +41,24 @@ class Calibrated:
 
 
 @pytest.fixture(scope="module")
-def calibrated(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Calibrated]:
+def calibrated(tmp_path_factory: pytest.TempPathFactory, backend: str) -> Iterator[Calibrated]:
     tmp = tmp_path_factory.mktemp("page_api")
-    settings = make_settings(
-        tmp / "data", camera_refresh_s=0.05, background_frames=7, ga_max_generations=40
-    )
-    upgrade_head(settings)
-    auth = {"Authorization": f"Bearer {new_key(settings, 'coach')}"}
-    truth = renderer.typical_target_camera(SIZE)
-    with api_client(create_app(settings)) as client:
-        court_id = client.post("/courts", json={"name": "page"}, headers=auth).json()["id"]
-        clip = court_clip_bytes(tmp, truth, SIZE, n_frames=20, seed=5)
-        response = client.post(f"/courts/{court_id}/calibrations", files=files(clip), headers=auth)
-        assert response.status_code == 202, response.text
-        assert run_one_job(settings) == "succeeded"
-        cal = client.get(f"/courts/{court_id}/camera", headers=auth).json()
-        yield Calibrated(settings, client, auth, court_id, cal, truth)
+    with database_url_for(backend) as url:
+        settings = migrated_settings(
+            tmp / "data", url, camera_refresh_s=0.05, background_frames=7, ga_max_generations=40
+        )
+        auth = {"Authorization": f"Bearer {new_key(settings, 'coach')}"}
+        truth = renderer.typical_target_camera(SIZE)
+        with api_client(create_app(settings)) as client:
+            court_id = client.post("/courts", json={"name": "page"}, headers=auth).json()["id"]
+            clip = court_clip_bytes(tmp, truth, SIZE, n_frames=20, seed=5)
+            response = client.post(
+                f"/courts/{court_id}/calibrations", files=files(clip), headers=auth
+            )
+            assert response.status_code == 202, response.text
+            assert run_one_job(settings) == "succeeded"
+            cal = client.get(f"/courts/{court_id}/camera", headers=auth).json()
+            yield Calibrated(settings, client, auth, court_id, cal, truth)
 
 
 def png(response: httpx.Response) -> np.ndarray:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import struct
 import zlib
+from collections.abc import Callable
 from pathlib import Path
 
 import httpx
@@ -17,9 +18,11 @@ from app.db.models import Job
 from app.db.session import make_engine, make_sessionmaker
 from app.main import create_app
 from app.settings import Settings
-from tests.service.conftest import api_client, make_settings
+from tests.service.conftest import api_client, new_key
 from tests.service.helpers import files, jpeg_bytes, png_bytes, video_bytes
 from tests.service.test_api import assert_error, make_court
+
+pytestmark = pytest.mark.both_databases
 
 
 def jobs_in_db(settings: Settings) -> list[Job]:
@@ -141,12 +144,8 @@ def test_decompression_bomb_rejected_from_header(
     assert_rejected_and_nothing_kept(response, settings, 422, "image_too_large")
 
 
-def test_image_pixel_limit_setting(tmp_path: Path) -> None:
-    settings = make_settings(tmp_path / "d", max_image_pixels=100 * 100)
-    from app.db.migrate import upgrade_head
-    from tests.service.conftest import new_key
-
-    upgrade_head(settings)
+def test_image_pixel_limit_setting(new_settings: Callable[..., Settings]) -> None:
+    settings = new_settings(max_image_pixels=100 * 100)
     auth = {"Authorization": f"Bearer {new_key(settings)}"}
     with api_client(create_app(settings)) as client:
         court_id = make_court(client, auth)
@@ -195,14 +194,10 @@ def test_video_without_decodable_frame(
     assert_rejected_and_nothing_kept(response, settings, 422, "video_no_frames")
 
 
-def test_video_limits(tmp_path: Path) -> None:
-    from app.db.migrate import upgrade_head
-    from tests.service.conftest import new_key
-
-    settings = make_settings(
-        tmp_path / "d", max_video_width_px=200, max_video_height_px=200, max_video_duration_s=1.0
+def test_video_limits(new_settings: Callable[..., Settings], tmp_path: Path) -> None:
+    settings = new_settings(
+        max_video_width_px=200, max_video_height_px=200, max_video_duration_s=1.0
     )
-    upgrade_head(settings)
     auth = {"Authorization": f"Bearer {new_key(settings)}"}
     with api_client(create_app(settings)) as client:
         court_id = make_court(client, auth)
@@ -215,12 +210,8 @@ def test_video_limits(tmp_path: Path) -> None:
     assert len(jobs_in_db(settings)) == 1
 
 
-def test_upload_size_limit_is_413_and_keeps_nothing(tmp_path: Path) -> None:
-    from app.db.migrate import upgrade_head
-    from tests.service.conftest import new_key
-
-    settings = make_settings(tmp_path / "d", max_upload_bytes=20_000)
-    upgrade_head(settings)
+def test_upload_size_limit_is_413_and_keeps_nothing(new_settings: Callable[..., Settings]) -> None:
+    settings = new_settings(max_upload_bytes=20_000)
     auth = {"Authorization": f"Bearer {new_key(settings)}"}
     with api_client(create_app(settings)) as client:
         court_id = make_court(client, auth)
@@ -242,12 +233,8 @@ def test_upload_size_limit_is_413_and_keeps_nothing(tmp_path: Path) -> None:
     assert leftovers == []
 
 
-def test_too_many_files(tmp_path: Path) -> None:
-    from app.db.migrate import upgrade_head
-    from tests.service.conftest import new_key
-
-    settings = make_settings(tmp_path / "d", max_files=2)
-    upgrade_head(settings)
+def test_too_many_files(new_settings: Callable[..., Settings]) -> None:
+    settings = new_settings(max_files=2)
     auth = {"Authorization": f"Bearer {new_key(settings)}"}
     with api_client(create_app(settings)) as client:
         court_id = make_court(client, auth)
@@ -363,12 +350,10 @@ def test_random_bytes_never_cause_a_server_error(
             assert_error(response, response.status_code)
 
 
-def test_size_limit_applies_while_streaming_without_content_length(tmp_path: Path) -> None:
-    from app.db.migrate import upgrade_head
-    from tests.service.conftest import new_key
-
-    settings = make_settings(tmp_path / "d", max_upload_bytes=50_000)
-    upgrade_head(settings)
+def test_size_limit_applies_while_streaming_without_content_length(
+    new_settings: Callable[..., Settings],
+) -> None:
+    settings = new_settings(max_upload_bytes=50_000)
     auth = {"Authorization": f"Bearer {new_key(settings)}"}
     body = (
         b'--b\r\nContent-Disposition: form-data; name="files"; filename="a.png"\r\n\r\n'

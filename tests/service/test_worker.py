@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -15,19 +16,20 @@ from sqlalchemy import select
 from app import media
 from app.calib import camera, scene, synthetic
 from app.db import queue
-from app.db.migrate import upgrade_head
 from app.db.models import Calibration
 from app.db.session import make_engine, make_sessionmaker
 from app.main import create_app
 from app.settings import Settings
 from tests import clips
-from tests.service.conftest import api_client, make_settings, new_key
+from tests.service.conftest import api_client, new_key
 from tests.service.helpers import court_clip_bytes, files
 from tests.service.test_api import assert_error, make_court
 from worker.main import Shutdown, process_job
 
 SIZE = (960, 540)
 MID_COURT_M = np.array([[3.2, 5.44], [2.0, 4.5], [4.4, 6.5], [3.2, 7.5]])
+
+pytestmark = pytest.mark.both_databases
 
 
 def run_one_job(settings: Settings) -> str:
@@ -41,15 +43,8 @@ def run_one_job(settings: Settings) -> str:
 
 
 @pytest.fixture
-def worker_settings(tmp_path: Path) -> Settings:
-    settings = make_settings(
-        tmp_path / "data",
-        camera_refresh_s=0.05,
-        background_frames=7,
-        progress_interval_s=0.1,
-    )
-    upgrade_head(settings)
-    return settings
+def worker_settings(new_settings: Callable[..., Settings]) -> Settings:
+    return new_settings(camera_refresh_s=0.05, background_frames=7, progress_interval_s=0.1)
 
 
 def png_frames(genome: np.ndarray, n: int, seed: int) -> list[bytes]:
@@ -184,34 +179,6 @@ def test_lost_media_fails_with_a_specific_code(worker_settings: Settings) -> Non
         assert run_one_job(worker_settings) == "failed"
         job = client.get(f"/jobs/{job_id}", headers=auth).json()
         assert job["error"]["code"] == "media_missing"
-
-
-@pytest.mark.postgres
-def test_upload_to_projection_on_postgres(tmp_path: Path) -> None:
-    from tests.service.conftest import postgres_schema
-
-    with postgres_schema() as url:
-        settings = make_settings(
-            tmp_path / "data", database_url=url, camera_refresh_s=0.05, background_frames=5
-        )
-        upgrade_head(settings)
-        auth = {"Authorization": f"Bearer {new_key(settings)}"}
-        genome = synthetic.typical_target_camera(SIZE)
-        with api_client(create_app(settings)) as client:
-            court_id = make_court(client, auth)
-            images = png_frames(genome, 3, seed=4)
-            job_id = client.post(
-                f"/courts/{court_id}/calibrations", files=files(*images), headers=auth
-            ).json()["job_id"]
-            assert run_one_job(settings) == "succeeded"
-            cal_id = client.get(f"/jobs/{job_id}", headers=auth).json()["calibration_id"]
-            assert wait_for_calibration(client, auth, court_id, cal_id)["calibration_id"] == cal_id
-            pixels = camera.floor_to_pixel(genome, MID_COURT_M)
-            body = client.post(
-                "/project", json={"court_id": court_id, "pixels": pixels.tolist()}, headers=auth
-            ).json()
-            error_cm = 100 * np.linalg.norm(np.array(body["points"]) - MID_COURT_M, axis=1)
-            assert error_cm.max() < 5.0, error_cm
 
 
 def _stored_result(settings: Settings, calibration_id: str) -> dict:
