@@ -186,35 +186,3 @@ def test_model_selection_counts_a_cost_drop_by_the_robust_likelihood() -> None:
     final = refine.refit_from_wide(selected, samples, maps, taus)
     floor_cm, lines_px = camera_errors(case.genome, final.genome, case.spec, size)
     assert floor_cm <= FOUND_FLOOR_CM and lines_px <= FOUND_LINES_PX, (floor_cm, lines_px)
-
-
-def test_junctions_are_weighed_down_where_the_camera_sees_them_through_a_wall() -> None:
-    """A camera behind the back wall and beyond the left wall's plane sees the left and back
-    junctions through glass: their samples weigh THROUGH_GLASS_JUNCTION_WEIGHT (and the end
-    samples of other junctions that touch those planes); painted lines (the left out line lies
-    in the same plane) keep 1. From inside the court every sample keeps 1."""
-    model = court_model("wsf")
-    samples = refine.fit_samples(model, 0.5)
-    outside = cases.make_case("corner_side", 2006).genome  # centre (-0.02, 12.56, -1.63) m
-    inside = cases.make_case("corner_side", 2003).genome  # centre (5.74, 0.63, -2.58) m
-    weighed = refine.weigh_junctions_seen_through_glass(samples, model, outside)
-    name_of = np.array(model.edge_names)[samples.edge]
-    down = weighed.weight == refine.THROUGH_GLASS_JUNCTION_WEIGHT
-    all_down = {name for name in model.edge_names if np.all(down[name_of == name])}
-    assert all_down == {
-        "left_floor_front",
-        "left_floor_box",
-        "left_floor_back",
-        "back_floor_left",
-        "back_floor_right",
-        "back_left_corner",
-        "back_right_corner",
-        "front_left_corner_low",
-        "front_left_corner_mid",
-        "front_left_corner_high",
-    }
-    assert not np.any(down & model.painted()[samples.edge])
-    assert set(name_of[down]) - all_down == {"front_floor", "right_floor_back"}  # end samples
-    assert np.all(weighed.weight[~down] == 1.0)
-    np.testing.assert_array_equal(weighed.points, samples.points)
-    assert np.all(refine.weigh_junctions_seen_through_glass(samples, model, inside).weight == 1.0)

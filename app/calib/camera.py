@@ -124,12 +124,6 @@ def court_extrinsics(genomes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _extrinsics_all(np.ascontiguousarray(as_population(genomes)))
 
 
-def camera_centre(genome: np.ndarray) -> np.ndarray:
-    """The camera centre in the court frame (3,)."""
-    r, t = court_extrinsics(genome)
-    return -r[0].T @ t[0]
-
-
 @numba.njit(cache=True, inline="always")
 def project_point_njit(
     r: np.ndarray, t: np.ndarray, g: np.ndarray, x: float, y: float, z: float

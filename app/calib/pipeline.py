@@ -753,8 +753,6 @@ def calibrate(
     report("refining", 0.0, {})
     samples = refine.fit_samples(model, spacing)
     best, fit, refined_scores = refine_candidates(candidates, samples, maps, verify, model, size)
-    # where the camera stands decides which junctions it sees through glass, for the final fit
-    samples = refine.weigh_junctions_seen_through_glass(samples, model, fit.genome)
     report("refining", 0.4, {})
     # with the camera known, what lies off the court (reflections in glass walls, crowds and
     # adverts seen on or through them) is set aside for the final fit and the verdict

@@ -21,7 +21,7 @@ independent residuals (neighbouring samples along a line are not independent).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -43,29 +43,17 @@ CORRELATION_LENGTH_PX = 12.0
 # seeds 1000+, 54 found cameras); with 200 px it is a one-standard-deviation figure again.
 UNCERTAINTY_CORRELATION_LENGTH_PX = 200.0
 FD_RELATIVE_STEP = 1e-3
-# A junction of two surfaces (floor and wall, wall and wall) is found as a step in colour, where
-# the contrast changes. Seen from beyond the wall's plane (a camera behind a glass back wall, or
-# outside a glass side wall), the strip of floor next to the junction is seen through that wall's
-# glass at a grazing angle, darker than the floor behind it, and the step lies a few centimetres
-# inside the court: on bench.synthetic's corner_side 2006 (a camera behind the back glass and
-# beyond the left wall's plane) the left floor junction's step lies 2-2.5 cm inside, 5 px at the
-# picture's edge, and every camera model bent the picture's edge onto it (lines 2.5 px RMS off).
-# Such a junction's residual counts as that of a line with four times the noise (weight 1/4).
-# (Every junction at 1/4 was measured and dropped: real courts lost junctions the verdict needs.)
-THROUGH_GLASS_JUNCTION_WEIGHT = 0.25
 
 
 @dataclass(frozen=True)
 class FitSamples:
     """Court samples to fit: points (M, 3), unit edge directions (M, 3), `use_ridge` (M,) bool
-    (painted lines match ridges only), `edge` (M,) court edge index, `weight` (M,) of each
-    sample's residual (1 unless `weigh_junctions_seen_through_glass`), spacing (m)."""
+    (painted lines match ridges only), `edge` (M,) court edge index, spacing (m)."""
 
     points: np.ndarray
     directions: np.ndarray
     use_ridge: np.ndarray
     edge: np.ndarray
-    weight: np.ndarray
     spacing_m: float
 
 
@@ -81,29 +69,8 @@ def fit_samples(model: CourtModel, spacing_m: float, ridges_for_painted: bool = 
         directions=np.ascontiguousarray(unit[edge]),
         use_ridge=painted,
         edge=edge.astype(np.int64),
-        weight=np.ones(len(edge)),
         spacing_m=float(spacing_m),
     )
-
-
-def weigh_junctions_seen_through_glass(
-    samples: FitSamples, model: CourtModel, genome: np.ndarray
-) -> FitSamples:
-    """`samples` with THROUGH_GLASS_JUNCTION_WEIGHT on the junction samples that lie in a wall's
-    plane the camera is beyond (it sees them through that wall, which must then be glass)."""
-    centre = camera.camera_centre(genome)
-    width_m, length_m = model.spec.width_m, model.spec.length_m
-    x, y = samples.points[:, 0], samples.points[:, 1]
-    beyond = np.zeros(len(x), dtype=bool)
-    for on_plane, camera_beyond in (
-        (x == 0.0, centre[0] < 0.0),
-        (x == width_m, centre[0] > width_m),
-        (y == length_m, centre[1] > length_m),
-    ):
-        beyond |= on_plane & camera_beyond
-    junction = ~model.painted()[samples.edge]
-    weight = np.where(junction & beyond, THROUGH_GLASS_JUNCTION_WEIGHT, 1.0)
-    return replace(samples, weight=weight)
 
 
 def spacing_for_width(image_width: int) -> float:
@@ -117,7 +84,6 @@ def _residuals_njit(
     points: np.ndarray,
     directions: np.ndarray,
     use_ridge: np.ndarray,
-    weight: np.ndarray,
     fold_tan2: np.ndarray,
     near_ridge: np.ndarray,
     near_any: np.ndarray,
@@ -129,15 +95,15 @@ def _residuals_njit(
     out: np.ndarray,
     raw: np.ndarray,
 ) -> None:
-    """Weighted robust residuals (N, M) into `out`; signed raw point-to-line distances into `raw`
-    (NaN where the sample is not matched)."""
+    """Robust residuals (N, M) into `out`; signed raw point-to-line distances into `raw` (NaN
+    where the sample is not matched)."""
     r = np.empty((3, 3))
     t = np.empty(3)
     for i in range(pop.shape[0]):
         g = pop[i]
         camera.extrinsics_njit(g, r, t)
         for j in range(points.shape[0]):
-            out[i, j] = weight[j] * tau
+            out[i, j] = tau
             raw[i, j] = np.nan
             x, y, z = points[j, 0], points[j, 1], points[j, 2]
             u, v, iu, iv, seen = seen_pixel_njit(r, t, g, x, y, z, fold_tan2[i], ignore)
@@ -163,7 +129,7 @@ def _residuals_njit(
                 continue
             d = nx * (u - ev_points[k, 0]) + ny * (v - ev_points[k, 1])
             raw[i, j] = d
-            out[i, j] = weight[j] * tau * d / np.sqrt(d * d + tau * tau)
+            out[i, j] = tau * d / np.sqrt(d * d + tau * tau)
 
 
 def residuals(
@@ -179,7 +145,6 @@ def residuals(
         samples.points,
         samples.directions,
         samples.use_ridge,
-        samples.weight,
         camera.lens_fold_tan2(pop),
         maps.near_ridge,
         maps.near_any,
@@ -262,10 +227,9 @@ def intrinsic_extensions(genome: np.ndarray, image_size: tuple[int, int]) -> tup
 class Fit:
     genome: np.ndarray
     model: CameraModel
-    cost: float  # mean squared weighted robust residual / tau^2 (0 perfect)
+    cost: float  # mean squared robust residual / tau^2 (0 perfect, 1 nothing matched)
     rms_px: float  # RMS of the matched raw distances within tau
     matched: int  # samples matched within tau
-    paired: np.ndarray  # (M,) bool: samples paired with evidence, at any distance
     jacobian: np.ndarray  # (M, K) of the robust residuals at the solution
     residual: np.ndarray  # (M,) robust residuals at the solution
     tau_px: float
@@ -319,7 +283,6 @@ def _summarise(
         cost=float(np.mean(robust**2) / tau_px**2),
         rms_px=rms,
         matched=int(inside.sum()),
-        paired=np.isfinite(raw),
         jacobian=jacobian,
         residual=robust,
         tau_px=tau_px,
@@ -508,8 +471,7 @@ def parameter_covariance(fit: Fit, samples: FitSamples, image_width: int) -> np.
     (UNCERTAINTY_CORRELATION_LENGTH_PX)."""
     j = fit.jacobian
     directions = fit.model.directions()
-    # (the residuals are weighted: far off, a sample's stands at its weight times tau)
-    inside = fit.paired & (np.abs(fit.residual) < 0.999 * fit.tau_px * samples.weight)
+    inside = np.abs(fit.residual) < 0.999 * fit.tau_px
     if inside.sum() <= fit.model.n_params:
         return np.full((camera.N_GENES, camera.N_GENES), np.inf)
     sigma2 = float(np.sum(fit.residual[inside] ** 2) / (inside.sum() - fit.model.n_params))

@@ -30,7 +30,6 @@ from app.calib import scene_raycast as rc
 from app.calib.camera import (
     DISTORTION_GENES,
     as_population,
-    camera_centre,
     check_image_size,
     court_extrinsics,
     floor_to_pixel,
@@ -577,6 +576,12 @@ def camera_rays(
     r_world_from_cam = np.ascontiguousarray(r[0].T)
     centre = -r_world_from_cam @ t[0]
     return (*rays, step_px, r_world_from_cam, centre)
+
+
+def camera_centre(genome: np.ndarray) -> np.ndarray:
+    """The camera centre in the court frame (3,)."""
+    r, t = court_extrinsics(genome)
+    return -r[0].T @ t[0]
 
 
 def render_layers(
