@@ -15,8 +15,9 @@ closest to the true camera's radial terms over the picture) and the search's med
 'picked' follows the candidates one step further, through `pipeline.refine_candidates` (each
 refined, the best-scoring one picked to start the final fit): the share of cases where the
 picked camera is near. A case near at 'candidates' but not at 'picked' is lost to the ranking of
-the refined cameras, not to the search (seeds 2000+: zoomed 2002 and 2003, where a camera
-metres off lays the court's across lines on the picture's and outscores the right one).
+the refined cameras, not to the search (seeds 2000+: zoomed 2003 and 2004, where a camera
+metres off lays the court's across lines on the picture's, or its half-court line on a glass
+wall's frame, and outscores the right one).
 """
 
 from __future__ import annotations

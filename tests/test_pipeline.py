@@ -278,6 +278,29 @@ def test_lens_fold_guard():
     assert camera.lens_fold_radius(genome) == np.inf
 
 
+def largest_k2_left_over_px(focal_px: float, image_size: tuple[int, int]) -> float:
+    """The most plausible k2's largest displacement over the picture less what k1 and the focal
+    length absorb (least squares over the radius)."""
+    r = np.linspace(0.0, 0.5 * np.hypot(*image_size) / focal_px, 200)
+    displacement_px = pipeline.PLAUSIBLE_K2 * r**5 * focal_px
+    basis = np.column_stack([r, r**3]) * focal_px
+    absorbed, *_ = np.linalg.lstsq(basis, displacement_px, rcond=None)
+    return float(np.abs(displacement_px - basis @ absorbed).max())
+
+
+@pytest.mark.parametrize(
+    ("focal_px", "image_size", "could_show"),
+    [(2700.0, (1280, 720), False), (900.0, (1920, 1080), True), (1500.0, (640, 360), False)],
+)
+def test_a_second_radial_term_is_tried_only_where_it_could_move_a_line_by_a_pixel(
+    focal_px, image_size, could_show
+):
+    genome = np.zeros(camera.N_GENES)
+    genome[camera.GENE["f_u"]] = genome[camera.GENE["f_v"]] = focal_px
+    assert pipeline.second_radial_term_could_show(genome, image_size) is could_show
+    assert (largest_k2_left_over_px(focal_px, image_size) > 1.0) is could_show
+
+
 def test_overlay_draws_the_court_on_a_copy(truth, photo):
     overlay = pipeline.draw_overlay(photo, truth)
     assert overlay.shape == photo.shape and overlay.dtype == np.uint8

@@ -89,6 +89,10 @@ REFINE_TAUS_AT_1920 = (16.0, 5.0, 2.0)
 OTHER_SPEC_SHARE = 0.6
 OTHER_SPEC_OWN_SHARE = 0.3
 OTHER_SPEC_LINE_M = 0.025
+# The largest second radial term (normalised radius) ranking reckons with; where even this one
+# could not move a line by a pixel, candidates are not refitted with it (see
+# `second_radial_term_could_show`).
+PLAUSIBLE_K2 = 0.5
 # Floor points whose expected error is reported: the T and the back corners.
 REPORTED_FLOOR_POINTS = ("T", "floor_back_left", "floor_back_right")
 # Players' outlines blur over a few pixels; evidence that close to a moving pixel is not trusted.
@@ -464,6 +468,18 @@ def score_cameras(
     return scores
 
 
+def second_radial_term_could_show(genome: np.ndarray, image_size: tuple[int, int]) -> bool:
+    """Whether a second radial term (k2) could move a line by a pixel in this camera's picture.
+    Over a picture reaching R = half-diagonal / focal from the axis, what k2 r^5 adds beyond
+    what k1 and the focal length absorb is at most |k2| R^5 f / 16 px (the minimax residual of
+    t^5 against t and t^3 on [0, 1] is 1/16, a Chebyshev polynomial's); with |k2| at most
+    PLAUSIBLE_K2 that is R^4 * half-diagonal * PLAUSIBLE_K2 / 16."""
+    width, height = image_size
+    half_diagonal_px = 0.5 * float(np.hypot(width, height))
+    reach = half_diagonal_px / float(genome[camera.GENE["f_u"]])
+    return bool(reach**4 * half_diagonal_px * PLAUSIBLE_K2 / 16.0 >= 1.0)
+
+
 def refine_candidates(
     candidates: np.ndarray,
     samples: refine.FitSamples,
@@ -478,8 +494,11 @@ def refine_candidates(
     its best with a second radial term (k2) as well: a wide-angle lens that one term cannot
     follow at the picture's edge would otherwise lose its lines there to the tight tolerance,
     and the right camera to a wrong one that puts fewer lines at the edge. The second term is
-    kept when it raises the score (a log-likelihood ratio) by more than BIC's penalty for it;
-    the final fit may add more terms on the evidence (`refine.select_model`). Ranking by the
+    kept when it raises the score (a log-likelihood ratio) by more than BIC's penalty for it,
+    and tried only where it could show (`second_radial_term_could_show`): in a narrow view
+    it cannot move a line by a pixel, and the refit only gave wrong candidates another path
+    (bench.synthetic zoomed 2002: a camera 3 m off then outscored the right one). The final
+    fit may add more terms on the evidence (`refine.select_model`). Ranking by the
     verdict first (a camera it takes beats a higher-scoring one it refuses) was measured and
     dropped: it lets the verdict judge several cameras per picture, and on other sports'
     courts one of them then passes. Returns the winner's index, its fit and every refined candidate's score."""
@@ -492,14 +511,21 @@ def refine_candidates(
         zip(candidates, models, strict=True),
     )
     scores = score_cameras(np.array([f.genome for f in fits]), verify, maps, model, image_size)
-    richer = parallel.ordered_map(
-        lambda ge: refine.refine_coarse_to_fine(
-            ge[0], samples, maps, taus, refine.model_with((*ge[1], "k2"))
+    could_show = [second_radial_term_could_show(f.genome, image_size) for f in fits]
+    richer: list[refine.Fit] = parallel.ordered_map(
+        lambda fge: (
+            refine.refine_coarse_to_fine(
+                fge[1], samples, maps, taus, refine.model_with((*fge[2], "k2"))
+            )
+            if fge[3]
+            else fge[0]
         ),
-        zip(candidates, extensions, strict=True),
+        zip(fits, candidates, extensions, could_show, strict=True),
     )
-    richer_scores = score_cameras(
-        np.array([f.genome for f in richer]), verify, maps, model, image_size
+    richer_scores = np.where(
+        could_show,
+        score_cameras(np.array([f.genome for f in richer]), verify, maps, model, image_size),
+        -np.inf,
     )
     # every parameter beyond square pixels at the centre and one radial term must earn its
     # place: more than BIC's penalty for each
