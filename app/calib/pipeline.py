@@ -511,22 +511,21 @@ def refine_candidates(
         zip(candidates, models, strict=True),
     )
     scores = score_cameras(np.array([f.genome for f in fits]), verify, maps, model, image_size)
-    could_show = [second_radial_term_could_show(f.genome, image_size) for f in fits]
-    richer: list[refine.Fit] = parallel.ordered_map(
-        lambda fge: (
-            refine.refine_coarse_to_fine(
-                fge[1], samples, maps, taus, refine.model_with((*fge[2], "k2"))
-            )
-            if fge[3]
-            else fge[0]
-        ),
-        zip(fits, candidates, extensions, could_show, strict=True),
-    )
-    richer_scores = np.where(
-        could_show,
-        score_cameras(np.array([f.genome for f in richer]), verify, maps, model, image_size),
-        -np.inf,
-    )
+    tried = [k for k, f in enumerate(fits) if second_radial_term_could_show(f.genome, image_size)]
+    richer = list(fits)
+    richer_scores = np.full(len(fits), -np.inf)
+    if tried:
+        refitted = parallel.ordered_map(
+            lambda k: refine.refine_coarse_to_fine(
+                candidates[k], samples, maps, taus, refine.model_with((*extensions[k], "k2"))
+            ),
+            tried,
+        )
+        for k, fit in zip(tried, refitted, strict=True):
+            richer[k] = fit
+        richer_scores[tried] = score_cameras(
+            np.array([f.genome for f in refitted]), verify, maps, model, image_size
+        )
     # every parameter beyond square pixels at the centre and one radial term must earn its
     # place: more than BIC's penalty for each
     penalty = float(np.log(len(samples.points)))
