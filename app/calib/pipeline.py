@@ -14,8 +14,11 @@ Stages (each reported through `progress(stage, fraction, info)`):
    (`refine.best_of_perturbed_starts`: the tight final fit has local minima a few pixels off;
    they may sharpen an accepted camera, and turn a refusal into an acceptance only where the
    lines did not pin the floor down), the camera model is chosen by the evidence (k2, aspect
-   ratio, principal point, tangential terms only when they pay), the parameters' uncertainty
-   is estimated, and the verdict (`quality`) is formed; a court of another spec that fits
+   ratio, principal point, tangential terms only when they pay), the camera is refitted with
+   the junctions' and the tin's evidence free to lie a little off their lines
+   (`refine.refine_with_edge_offsets`: their steps move with shadows and reflections, and the
+   lens terms bent the picture's edge onto them), the parameters' uncertainty is estimated,
+   and the verdict (`quality`) is formed; a court of another spec that fits
    clearly better is reported.
 
 `CourtNotFound` is raised, with the reasons and the rejected camera, rather than returning a
@@ -789,10 +792,16 @@ def calibrate(
     polished = refine.best_of_perturbed_starts(fit, samples, maps, refine_taus(width)[1:])
     plain = fit
 
+    offset_edges = refine.offset_edges(model)
+
     def with_chosen_model(start: refine.Fit) -> refine.Fit:
         """The camera model the evidence asks for, refitted from a wide truncation."""
         chosen = refine.select_model(start, samples, maps, width)
-        return refine.refit_from_wide(chosen, samples, maps, refine_taus(width))
+        wide = refine.refit_from_wide(chosen, samples, maps, refine_taus(width))
+        # then with the junctions' and the tin's evidence free to lie a little off their lines
+        return refine.refine_with_edge_offsets(
+            wide, samples, maps, refine_taus(width)[1:], offset_edges, width
+        )[0]
 
     fit = with_chosen_model(polished)
     report("refining", 0.7, {})
