@@ -264,6 +264,18 @@ class Fit:
     tau_px: float
 
 
+def _forward_difference_cameras(
+    start: np.ndarray, directions: np.ndarray, x: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The cameras at `x` (along the model's `directions` from `start`) and at `x` stepped in
+    each column, (K + 1, 15), and the steps (K,): one compiled call gives a forward-difference
+    Jacobian."""
+    steps = FD_RELATIVE_STEP * np.where(x >= 0.0, 1.0, -1.0) * np.maximum(1.0, np.abs(x))
+    shifted = x[None, :] + np.diag(steps)
+    cameras = start[None, :] + np.vstack([x[None, :], shifted]) @ directions.T
+    return cameras, steps
+
+
 def refine(
     genome: np.ndarray,
     samples: FitSamples,
@@ -281,9 +293,7 @@ def refine(
         return residuals(start + directions @ x, samples, maps, tau_px)[0]
 
     def jac(x: np.ndarray) -> np.ndarray:
-        steps = FD_RELATIVE_STEP * np.where(x >= 0.0, 1.0, -1.0) * np.maximum(1.0, np.abs(x))
-        shifted = x[None, :] + np.diag(steps)
-        cameras = start[None, :] + np.vstack([x[None, :], shifted]) @ directions.T
+        cameras, steps = _forward_difference_cameras(start, directions, x)
         values, _ = residuals(cameras, samples, maps, tau_px)
         return ((values[1:] - values[0]) / steps[:, None]).T
 
@@ -604,12 +614,7 @@ def refine_with_edge_offsets(
             return np.concatenate([robust, prior_weight * x[n:]])
 
         def jac(x: np.ndarray, tau: float = tau) -> np.ndarray:
-            cam = x[:n]
-            steps = (
-                FD_RELATIVE_STEP * np.where(cam >= 0.0, 1.0, -1.0) * np.maximum(1.0, np.abs(cam))
-            )
-            shifted = cam[None, :] + np.diag(steps)
-            cameras = start[None, :] + np.vstack([cam[None, :], shifted]) @ directions.T
+            cameras, steps = _forward_difference_cameras(start, directions, x[:n])
             values, raw, side = offset_residuals(cameras, samples, maps, tau, offsets_of(x))
             out = np.zeros((len(samples.points) + len(edges), n + len(edges)))
             out[: len(samples.points), :n] = ((values[1:] - values[0]) / steps[:, None]).T
@@ -627,6 +632,9 @@ def refine_with_edge_offsets(
     genome = start + directions @ x[:n]
     offsets = np.zeros(len(offset_edge))
     offsets[edges] = x[n:]
+    # The cost and RMS are the camera's against the evidence as it lies (no offsets). The
+    # Jacobian and residuals that `parameter_covariance` reads stay those of `fit`, the camera
+    # before this refit: the reported uncertainty is that fit's.
     return _summarise(
         genome, samples, maps, taus_px[-1], fit.model, fit.jacobian, fit.residual
     ), offsets
