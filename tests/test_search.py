@@ -488,6 +488,12 @@ def test_the_lens_the_court_lines_agree_on_is_a_candidate_beside_a_straight_grap
     [
         ([3.2, -5.0, -2.0], True),  # behind the front wall, below its top: sees no court
         ([3.2, -5.0, -7.0], False),  # high above it, looking down over it
+        # 13 m behind it and 6 m high: the wall's top hides the whole floor (the line of sight
+        # over a 4.57 m top reaches the floor 39 m beyond the wall); 11 m high sees the back
+        ([3.2, -13.0, -6.0], True),
+        ([3.2, -13.0, -11.0], False),
+        # beside the court, beyond a side wall's plane: it sees the floor through that wall
+        ([-2.0, -1.5, -2.0], False),
         ([3.2, -0.2, -2.0], False),  # mounted on the front wall
         ([3.2, 12.0, -2.0], False),  # behind the back wall
     ],
@@ -496,5 +502,5 @@ def test_a_camera_behind_the_front_wall_is_implausible(centre, behind):
     genome = search.look_at_genomes(
         np.array([centre]), np.array([[3.2, 5.0, 0.0]]), np.zeros(1), np.array([800.0]), SIZE
     )
-    assert search.behind_front_wall(genome)[0] == behind
+    assert search.behind_front_wall(genome, court.court_model())[0] == behind
     assert search.implausible_placement(genome, court.court_model())[0] == behind

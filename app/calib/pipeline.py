@@ -645,7 +645,7 @@ def judge_camera(
     figures["rms_px"] = fit.rms_px
     figures["floor_share"] = float(search.floor_shares(fit.genome, model, image_size)[0])
     figures["camera_in_play_volume"] = float(search.in_play_volume(fit.genome, model)[0])
-    figures["camera_behind_front_wall"] = float(search.behind_front_wall(fit.genome)[0])
+    figures["camera_behind_front_wall"] = float(search.behind_front_wall(fit.genome, model)[0])
     figures["pixel_aspect"] = float(fit.genome[camera.GENE["f_v"]] / fit.genome[camera.GENE["f_u"]])
     offset = fit.genome[[camera.GENE["c_u"], camera.GENE["c_v"]]] - camera.picture_centre(
         image_size

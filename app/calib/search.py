@@ -74,9 +74,11 @@ PLAY_VOLUME_WALL_MARGIN_M = 1.0
 PLAY_VOLUME_BACK_MARGIN_M = 2.0
 PLAY_VOLUME_HEIGHT_M = 2.0
 # The front wall is solid in every court (the ball is played against it; glass is only ever at
-# the back and the sides): a camera behind it sees the court only from above its top, which is
-# at least the front-wall out line's height. Margin (m) behind the wall's plane for a camera
-# mounted on it.
+# the back and the sides): a camera behind it, within its width, sees the floor only over its
+# top, which is at least the front-wall out line's height, and the farther behind the wall it
+# stands the higher it must be for the line of sight over the top to reach the floor before the
+# back wall. (Beyond a side wall's plane, it sees the floor through that wall.) Margin (m)
+# behind the wall's plane for a camera mounted on it.
 FRONT_WALL_MARGIN_M = 0.5
 FRONT_WALL_MIN_TOP_M = 4.57
 MAX_TILT_UP_RAD = np.deg2rad(15.0)
@@ -547,7 +549,8 @@ def _placed_plausibly(
     if abs(cx - court_centre[0]) > max_distance or abs(cy - court_centre[1]) > max_distance:
         return False
     return not (
-        _in_play_volume(cx, cy, cz, court_size[0], court_size[1]) or _behind_front_wall(cy, cz)
+        _in_play_volume(cx, cy, cz, court_size[0], court_size[1])
+        or _behind_front_wall(cx, cy, cz, court_size[0], court_size[1])
     )
 
 
@@ -566,9 +569,17 @@ def _in_play_volume(x: float, y: float, z: float, width_m: float, length_m: floa
 
 
 @numba.njit(cache=True, inline="always")
-def _behind_front_wall(y: float, z: float) -> bool:
-    """Whether a point (court frame, z down) is behind the front wall and below its top."""
-    return y < -FRONT_WALL_MARGIN_M and z > -FRONT_WALL_MIN_TOP_M
+def _behind_front_wall(x: float, y: float, z: float, width_m: float, length_m: float) -> bool:
+    """Whether a camera at a point (court frame, z down) behind the front wall and within its
+    width has the wall hide the whole floor: its line of sight over the wall's lowest possible
+    top (FRONT_WALL_MIN_TOP_M) meets the floor beyond the back wall, or never. At the wall's
+    plane that is a camera below the top; 13 m behind it, one below 10.6 m (bench.synthetic
+    zoomed 2003 was taken for a camera 6 m high there, laying the court on a floor it could not
+    see). Every line of sight from such a camera to the floor crosses the wall's plane within
+    its width, so the top decides."""
+    if y >= -FRONT_WALL_MARGIN_M or not 0.0 <= x <= width_m:
+        return False
+    return -z < FRONT_WALL_MIN_TOP_M * (length_m - y) / length_m
 
 
 def _placement_rule(genomes: np.ndarray, rule: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
@@ -588,9 +599,12 @@ def in_play_volume(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
     return _placement_rule(genomes, lambda c: _in_play_volume_all(c, spec.width_m, spec.length_m))
 
 
-def behind_front_wall(genomes: np.ndarray) -> np.ndarray:
-    """(N,) bool: the camera stands behind the front wall, below its top (it sees no court)."""
-    return _placement_rule(genomes, _behind_front_wall_all)
+def behind_front_wall(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
+    """(N,) bool: the camera stands behind the front wall, which hides the floor from it."""
+    spec = model.spec
+    return _placement_rule(
+        genomes, lambda c: _behind_front_wall_all(c, spec.width_m, spec.length_m)
+    )
 
 
 def implausible_placement(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
@@ -599,15 +613,19 @@ def implausible_placement(genomes: np.ndarray, model: CourtModel) -> np.ndarray:
     spec = model.spec
     return _placement_rule(
         genomes,
-        lambda c: _in_play_volume_all(c, spec.width_m, spec.length_m) | _behind_front_wall_all(c),
+        lambda c: (
+            _in_play_volume_all(c, spec.width_m, spec.length_m)
+            | _behind_front_wall_all(c, spec.width_m, spec.length_m)
+        ),
     )
 
 
 @numba.njit(cache=True, nogil=True)
-def _behind_front_wall_all(centres: np.ndarray) -> np.ndarray:
+def _behind_front_wall_all(centres: np.ndarray, width_m: float, length_m: float) -> np.ndarray:
     out = np.empty(centres.shape[0], dtype=np.bool_)
     for i in range(centres.shape[0]):
-        out[i] = _behind_front_wall(centres[i, 1], centres[i, 2])
+        c = centres[i]
+        out[i] = _behind_front_wall(c[0], c[1], c[2], width_m, length_m)
     return out
 
 
