@@ -123,6 +123,42 @@ def test_a_refusal_says_whether_only_the_pinning_rules_refused(change, only_pinn
     assert judged.refused_only_by(quality.PINNING_RULES) == only_pinning
 
 
+@pytest.mark.parametrize(
+    ("floor_across", "across", "floor_along", "along", "refused"),
+    [
+        (1.0, 4.0, 7.0, 7.0, False),  # a far view: the walls' lines across make up for the floor's
+        (8.0, 8.0, 1.0, 2.0, False),  # one floor line along and a side wall's out line
+        (0.0, 5.0, 7.0, 7.0, True),  # no floor line across: wall lines alone do not pin the floor
+        (8.0, 8.0, 0.0, 2.0, True),
+        (2.0, 2.0, 7.0, 7.0, True),  # too few across, walls included
+        (8.0, 8.0, 1.0, 1.0, True),
+    ],
+)
+def test_wall_lines_count_toward_the_directions_by_the_way_they_run(
+    floor_across, across, floor_along, along, refused
+):
+    figures = {
+        **_typical_right(),
+        "floor_across_supported": floor_across,
+        "across_supported": across,
+        "floor_along_supported": floor_along,
+        "along_supported": along,
+    }
+    judged = quality.verdict(figures)
+    assert ("floor_directions" in judged.refused_by) == refused, judged.reasons
+
+
+def test_the_directions_of_the_court_edges():
+    model = court_model()
+    across, along = quality._edge_directions(model)
+    names = np.array(model.edge_names)
+    assert {"tin", "service", "front_out", "back_out", "short_left_inner", "front_floor"} <= set(
+        names[across]
+    )
+    assert {"left_out", "right_out", "half_court", "left_floor_box"} <= set(names[along])
+    assert not (across | along)[quality._upright_edges(model)].any()
+
+
 def test_a_camera_with_free_intrinsics_and_wall_lines_passes():
     figures = {**_typical_right(), "pixel_aspect": 0.75, "principal_point_offset_share": 0.3}
     assert quality.verdict({**figures, "wall_edges_supported": 3.0}).label == "good"

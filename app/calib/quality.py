@@ -4,8 +4,10 @@ Figures (all from the final camera on the line evidence, `quality_figures`):
 - per court edge, the projected length in the picture (`visible`) and the part of it lying on
   evidence of the right kind running the same way within a tight tolerance (`supported`);
 - supported_edges: edges with at least MIN_EDGE_PX in view of which at least half is supported;
-- floor_directions: whether supported floor lines run both across and along the court (a court
-  needs both: one direction alone is any set of parallel stripes);
+- floor_directions: whether supported lines run both across and along the court (a court needs
+  both: one direction alone is any set of parallel stripes): at least one on the floor each way,
+  and enough in all, the wall lines counted by the way they run (the tin, service and out lines
+  of the front and back walls across, the side walls' out lines along);
 - support_fraction: supported / visible length over the court, and chance_fraction: what a
   random placement would get on this evidence (the share of the picture within tolerance of
   evidence, times the share of directions that pass): support_excess = how far above chance;
@@ -80,8 +82,15 @@ MIN_WALL_EDGES_FREE_INTRINSICS = 3
 # what counts as non-square pixels / an off-centre principal point (share of the width)
 FREE_ASPECT = 0.01
 FREE_PRINCIPAL_POINT_SHARE = 0.01
-MIN_FLOOR_ACROSS = 3
-MIN_FLOOR_ALONG = 2
+# Lines across and along the court, the walls' lines counted by the way they run: a line on the
+# front or back wall pins the court's length as a floor line across does, a side wall's out line
+# its width as a floor line along does (bench.synthetic: right cameras of far broadcast views,
+# whose short line and box backs hardly show at 640 x 360, were refused with 1-2 floor lines
+# across and 7-9 wall lines). At least one line each way must still be on the floor (stripes
+# of one direction on the floor and a grid on a wall are not a court's floor).
+MIN_ACROSS = 3
+MIN_ALONG = 2
+MIN_FLOOR_LINES_EACH_WAY = 1
 MIN_SUPPORT_EXCESS = 0.35
 # feet are mapped on the floor: a camera whose court floor fills under a tenth of the picture
 # is no use for that, and on bench.synthetic (seeds 1000+, 96 views, 36 negatives) every camera
@@ -139,6 +148,17 @@ def _floor_edge_directions(model: CourtModel) -> tuple[np.ndarray, np.ndarray]:
     return across, along
 
 
+def _edge_directions(model: CourtModel) -> tuple[np.ndarray, np.ndarray]:
+    """bool (E,) edges anywhere on the court that run across it (x only changes: floor lines
+    across, the front and back walls' lines) and along it (x constant, y changes: floor lines
+    along, the side walls' out lines)."""
+    a = model.nodes[model.edges[:, 0]]
+    b = model.nodes[model.edges[:, 1]]
+    across = (a[:, 1] == b[:, 1]) & (a[:, 2] == b[:, 2])
+    along = (a[:, 0] == b[:, 0]) & (a[:, 1] != b[:, 1])
+    return across, along
+
+
 def _upright_edges(model: CourtModel) -> np.ndarray:
     """bool (E,): vertical edges (the walls' corners)."""
     a = model.nodes[model.edges[:, 0]]
@@ -183,6 +203,7 @@ def quality_figures(
     share = np.where(visible > 0, supported / np.maximum(visible, 1e-9), 0.0)
     good_edge = in_view & (share >= SUPPORTED_SHARE)
     across, along = _floor_edge_directions(model)
+    any_across, any_along = _edge_directions(model)
     total_visible = float(visible.sum())
     fraction = float(supported.sum()) / total_visible if total_visible > 0 else 0.0
     chance = chance_fraction(maps, tolerance)
@@ -205,6 +226,8 @@ def quality_figures(
         "log_likelihood_ratio_per_px": float(llr[0] / total_visible) if total_visible else 0.0,
         "floor_across_supported": float((good_edge & across).sum()),
         "floor_along_supported": float((good_edge & along).sum()),
+        "across_supported": float((good_edge & any_across).sum()),
+        "along_supported": float((good_edge & any_along).sum()),
         "support_fraction": fraction,
         "chance_fraction": chance,
         "support_excess": float(excess),
@@ -233,14 +256,24 @@ def verdict(figures: dict[str, float]) -> Verdict:
         refusals.append(reason)
 
     doubts: list[str] = []
-    across = figures["floor_across_supported"]
-    along = figures["floor_along_supported"]
-    if across < MIN_FLOOR_ACROSS or along < MIN_FLOOR_ALONG:
+    floor_across = figures["floor_across_supported"]
+    floor_along = figures["floor_along_supported"]
+    # (figures from before the wall lines were counted have the floor's only)
+    across = figures.get("across_supported", floor_across)
+    along = figures.get("along_supported", floor_along)
+    if (
+        floor_across < MIN_FLOOR_LINES_EACH_WAY
+        or floor_along < MIN_FLOOR_LINES_EACH_WAY
+        or across < MIN_ACROSS
+        or along < MIN_ALONG
+    ):
         refuse(
             "floor_directions",
-            f"the floor lines found ({across:.0f} across the court, {along:.0f} along it; need "
-            f"{MIN_FLOOR_ACROSS} and {MIN_FLOOR_ALONG}) do not pin the floor down (film more of "
-            "the floor: the short line, the service boxes and a side wall's floor line)",
+            f"the court lines found ({floor_across:.0f} across the floor and {floor_along:.0f} "
+            f"along it; {across:.0f} across the court and {along:.0f} along it with the walls' "
+            f"lines; need {MIN_FLOOR_LINES_EACH_WAY} each way on the floor and {MIN_ACROSS} and "
+            f"{MIN_ALONG} in all) do not pin the floor down (film more of the floor: the short "
+            "line, the service boxes and a side wall's floor line)",
         )
     if figures["supported_edges"] < MIN_SUPPORTED_EDGES:
         refuse(
