@@ -9,7 +9,7 @@ import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
-from sqlalchemy import CheckConstraint, insert, inspect, select
+from sqlalchemy import CheckConstraint, insert, inspect, select, update
 
 from app.db import queue
 from app.db.migrate import alembic_config, current_revision, head_revision, upgrade_head
@@ -27,7 +27,7 @@ from app.db.models import (
 from app.db.session import make_engine
 from app.settings import Settings
 from tests.service.conftest import make_settings, postgres_schema
-from tests.service.test_queue import add_jobs, job_row, make_calibration
+from tests.service.test_queue import job_row, make_calibration
 
 
 def _assert_schema_matches_models(settings: Settings) -> None:
@@ -99,14 +99,15 @@ def _jobs_at_an_old_revision(engine, n: int) -> list[str]:
 
 
 def _assert_job_attempts_migrate_up_and_down_with_jobs(settings: Settings) -> None:
-    """0004 -> 0005 on a database with a job in it, work recorded in job_attempts, back down to
-    0004 (the table goes, the job stays) and up again."""
+    """0004 -> 0005 (and on to the head, which the queue's code needs) on a database with a job
+    in it, work recorded in job_attempts, back down to 0004 (the table goes, the job stays) and
+    up again."""
     config = alembic_config(settings)
     engine = make_engine(settings)
     try:
         command.upgrade(config, "0004")
-        _, [job_id] = add_jobs(engine, 1)
-        command.upgrade(config, "0005")
+        [job_id] = _jobs_at_an_old_revision(engine, 1)
+        upgrade_head(settings)
         job = queue.claim(engine, "w", lease_s=60)
         assert job is not None
         queue.finish_success(engine, job, "w", make_calibration(job), {})
@@ -186,6 +187,42 @@ def test_sqlite_table_rebuilds_keep_the_rows_that_reference_the_table(tmp_path: 
             assert conn.exec_driver_sql("PRAGMA foreign_keys").scalar() == 1
     finally:
         engine.dispose()
+
+
+def _assert_tenants_last_claim_is_filled_from_their_jobs(settings: Settings) -> None:
+    """0006 -> 0007: a tenant's last claim is the latest start of its jobs (null if none ran)."""
+    config = alembic_config(settings)
+    engine = make_engine(settings)
+    try:
+        command.upgrade(config, "0006")
+        first, second = _jobs_at_an_old_revision(engine, 2)
+        _jobs_at_an_old_revision(engine, 1)  # another tenant, never served
+        started = utcnow() - timedelta(minutes=5)
+        with engine.begin() as conn:
+            for job_id, at in ((first, started), (second, started + timedelta(seconds=30))):
+                conn.execute(update(Job).where(Job.id == job_id).values(started_at=at))
+        command.upgrade(config, "0007")
+        with engine.connect() as conn:
+            turns = conn.execute(select(Tenant.last_claimed_at).order_by(Tenant.created_at)).all()
+        assert [row[0] for row in turns] == [started + timedelta(seconds=30), None]
+        command.downgrade(config, "0006")
+        with engine.connect() as conn:
+            assert "last_claimed_at" not in {
+                c["name"] for c in inspect(conn).get_columns("tenants")
+            }
+    finally:
+        engine.dispose()
+
+
+def test_tenants_last_claim_is_filled_from_their_jobs_sqlite(tmp_path: Path) -> None:
+    _assert_tenants_last_claim_is_filled_from_their_jobs(make_settings(tmp_path / "data"))
+
+
+@pytest.mark.postgres
+def test_tenants_last_claim_is_filled_from_their_jobs_postgres(tmp_path: Path) -> None:
+    with postgres_schema() as url:
+        settings = make_settings(tmp_path / "data", database_url=url)
+        _assert_tenants_last_claim_is_filled_from_their_jobs(settings)
 
 
 def test_models_differ_from_an_unmigrated_database(tmp_path: Path) -> None:
