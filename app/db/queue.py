@@ -312,6 +312,10 @@ def finish_success(
     """Store the calibration, mark the job succeeded and make it the court's active camera: one
     transaction. The court's camera only moves forward: an older upload finishing late does not
     replace the camera of a newer one. Raises LeaseLost (and stores nothing) if the job is not ours.
+
+    Safe to call again with the same calibration after an error (the worker retries it): when the
+    connection dropped after the database committed but before it said so, the job has already
+    succeeded with this calibration, and the call does nothing more.
     """
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
         now = _now_under_lock(session, now)
@@ -333,6 +337,13 @@ def finish_success(
             .execution_options(synchronize_session=False)
         )
         if not result.rowcount:  # type: ignore[attr-defined]
+            stored = session.scalar(
+                select(Job.calibration_id).where(
+                    Job.id == job.id, Job.status == JobStatus.SUCCEEDED
+                )
+            )
+            if stored == calibration.id:  # an earlier call committed it (ids are never reused)
+                return
             raise LeaseLost(f"job {job.id} is no longer running under worker {worker_id}")
         _close_own_attempt(session, job.id, worker_id, AttemptOutcome.SUCCEEDED, now)
         # Lock the court before inserting the calibration: the insert's foreign-key check takes a

@@ -126,6 +126,28 @@ def test_expired_lease_is_reclaimed_and_the_old_worker_is_fenced_off(engine) -> 
     assert (row.status, row.attempts, row.progress, row.worker_id) == ("succeeded", 2, 1.0, "new")
 
 
+def test_storing_the_same_calibration_again_does_nothing_more(engine) -> None:
+    """The worker retries finish_success when the connection drops; if the commit had gone
+    through, the retry finds the job succeeded with its calibration and stops there. Another
+    calibration for the finished job is still refused."""
+    _, [job_id] = add_jobs(engine, 1)
+    job = queue.claim(engine, "w", lease_s=60)
+    assert job is not None
+    calibration = make_calibration(job)
+    queue.finish_success(engine, job, "w", calibration, {"total": 1.0})
+    queue.finish_success(engine, job, "w", calibration, {"total": 2.0})
+    with pytest.raises(queue.LeaseLost):
+        queue.finish_success(engine, job, "w", make_calibration(job), {})
+    row = job_row(engine, job_id)
+    assert (row.status, row.calibration_id, row.timings) == (
+        "succeeded",
+        calibration.id,
+        {"total": 1.0},
+    )
+    with make_sessionmaker(engine)() as session:
+        assert session.scalars(select(Calibration.id)).all() == [calibration.id]
+
+
 def test_a_claim_that_waited_for_a_lock_still_gets_its_whole_lease(engine) -> None:
     """The claim first fails jobs whose last attempt's worker was lost; on PostgreSQL that waits
     for their row locks (here another transaction holds one for 1.5 s). The job it then claims

@@ -12,15 +12,27 @@ import threading
 import time
 from pathlib import Path
 
+import cv2
 import pytest
+from sqlalchemy import event, select
 from sqlalchemy.exc import OperationalError
+from sqlalchemy.orm import Session
 
+from app.calib import scene, synthetic
 from app.calib.pipeline import CourtNotFound
-from app.db import queue
+from app.db import queue, repo
 from app.db.migrate import upgrade_head
-from app.db.models import JobStatus, utcnow
-from app.db.session import make_engine
-from app.media import MediaError
+from app.db.models import (
+    AttemptOutcome,
+    Calibration,
+    Court,
+    JobAttempt,
+    JobStatus,
+    new_id,
+    utcnow,
+)
+from app.db.session import make_engine, make_sessionmaker
+from app.media import MediaError, media_store
 from app.settings import Settings
 from tests.service.conftest import make_settings
 from tests.service.test_queue import add_jobs, job_row
@@ -148,6 +160,85 @@ def test_a_database_away_for_good_does_not_kill_the_worker(settings: Settings, m
     engine = make_engine(settings)
     try:
         assert job_row(engine, job_id).status == JobStatus.RUNNING
+    finally:
+        engine.dispose()
+
+
+def queue_a_job_of_court_images(settings: Settings) -> str:
+    """A queued job whose upload is three rendered frames of a court, as the API stores one."""
+    size = (640, 360)
+    frames = scene.render_clip_frames(synthetic.typical_target_camera(size), size, 3, 3)
+    job_id = new_id()
+    folder = media_store(settings).create_job_dir(job_id)
+    names = [f"{i:03d}.png" for i in range(len(frames))]
+    for name, frame in zip(names, frames, strict=True):
+        assert cv2.imwrite(str(folder / name), frame)
+    engine = make_engine(settings)
+    try:
+        with make_sessionmaker(engine).begin() as session:
+            key_row, _ = repo.create_api_key(session, name="t")
+            court = repo.create_court(session, key_row.tenant_id, "c", "wsf")
+            repo.new_job(
+                session,
+                job_id=job_id,
+                tenant_id=key_row.tenant_id,
+                court_id=court.id,
+                media_kind="images",
+                media_files=names,
+                params={"seed": 0},
+                max_attempts=3,
+            )
+    finally:
+        engine.dispose()
+    return job_id
+
+
+def test_a_success_is_stored_once_the_database_is_back(settings: Settings, caplog) -> None:
+    """The connection drops while the finished calibration is stored: first its INSERT fails,
+    then the COMMIT goes through but its answer is lost. The worker tries again; the job ends
+    succeeded on its first attempt, with its calibration and the calibration's images."""
+    job_id = queue_a_job_of_court_images(settings)
+    engine = make_engine(settings)
+    inserts: list[str] = []
+    answer_lost = []
+
+    def drop_the_first_insert(conn, cursor, statement, parameters, context, executemany) -> None:
+        if statement.startswith("INSERT INTO calibrations"):
+            inserts.append(statement)
+            if len(inserts) == 1:
+                raise db_down()
+
+    def lose_the_answer_of_the_next_commit(session: Session) -> None:
+        if len(inserts) == 2 and not answer_lost:
+            answer_lost.append(True)
+            raise db_down()
+
+    event.listen(engine, "before_cursor_execute", drop_the_first_insert)
+    event.listen(Session, "after_commit", lose_the_answer_of_the_next_commit)
+    try:
+        job = queue.claim(engine, "w", settings.lease_s)
+        assert job is not None and job.id == job_id
+        status = worker_main.process_job(
+            engine, settings, job, "w", worker_main.Shutdown(threading.Event())
+        )
+    finally:
+        event.remove(Session, "after_commit", lose_the_answer_of_the_next_commit)
+        event.remove(engine, "before_cursor_execute", drop_the_first_insert)
+    try:
+        assert status == JobStatus.SUCCEEDED
+        assert len(inserts) == 2 and answer_lost == [True]
+        assert "storing the calibration of job" in caplog.text and "retrying" in caplog.text
+        row = job_row(engine, job_id)
+        assert (row.status, row.attempts, row.error_code) == (JobStatus.SUCCEEDED, 1, None)
+        with make_sessionmaker(engine)() as session:
+            calibration = session.get(Calibration, row.calibration_id)
+            assert calibration is not None and calibration.job_id == job_id
+            court = session.get(Court, calibration.court_id)
+            assert court is not None and court.active_calibration_id == calibration.id
+            outcomes = session.scalars(select(JobAttempt.outcome)).all()
+        assert outcomes == [AttemptOutcome.SUCCEEDED]
+        images = media_store(settings).calibration_dir(calibration.id)
+        assert {"background.png", "overlay.png", "edges.png"} <= {p.name for p in images.iterdir()}
     finally:
         engine.dispose()
 
