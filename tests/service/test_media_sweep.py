@@ -1,23 +1,26 @@
-"""The media sweep: uploads of failed jobs after the retention period, and orphan job folders."""
+"""The media sweep: uploads of failed jobs after the retention period, and orphan job folders
+(on SQLite and PostgreSQL)."""
 
 from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from datetime import timedelta
-from pathlib import Path
 
+import pytest
 from sqlalchemy import update
 
 from app.db import repo
-from app.db.migrate import upgrade_head
 from app.db.models import Job, new_id, utcnow
 from app.db.session import make_engine, make_sessionmaker
 from app.main import create_app
 from app.media.store import media_store
 from app.media.sweep import sweep_media
 from app.settings import Settings
-from tests.service.conftest import api_client, make_settings
+from tests.service.conftest import api_client
+
+pytestmark = pytest.mark.both_databases
 
 DAY_S = 24 * 3600.0
 
@@ -60,11 +63,10 @@ def _orphan(settings: Settings, age_s: float) -> str:
     return orphan_id
 
 
-def test_sweep_removes_old_failed_uploads_and_quiet_orphans_only(tmp_path: Path) -> None:
-    settings = make_settings(
-        tmp_path / "data", failed_media_retention_s=2 * DAY_S, orphan_media_grace_s=3600
-    )
-    upgrade_head(settings)
+def test_sweep_removes_old_failed_uploads_and_quiet_orphans_only(
+    new_settings: Callable[..., Settings],
+) -> None:
+    settings = new_settings(failed_media_retention_s=2 * DAY_S, orphan_media_grace_s=3600)
     engine = make_engine(settings)
     sessions = make_sessionmaker(engine)
     with sessions.begin() as session:
@@ -90,9 +92,8 @@ def test_sweep_removes_old_failed_uploads_and_quiet_orphans_only(tmp_path: Path)
     assert crashed_upload not in left and old_failure not in left
 
 
-def test_api_sweeps_orphans_at_start(tmp_path: Path) -> None:
-    settings = make_settings(tmp_path / "data", orphan_media_grace_s=10)
-    upgrade_head(settings)
+def test_api_sweeps_orphans_at_start(new_settings: Callable[..., Settings]) -> None:
+    settings = new_settings(orphan_media_grace_s=10)
     crashed_upload = _orphan(settings, age_s=60)
     with api_client(create_app(settings)) as client:
         deadline = time.monotonic() + 10

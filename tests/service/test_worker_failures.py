@@ -1,5 +1,5 @@
 """How the worker records a failed job: the exception table, retry backoff, and a database that
-is away while the failure is recorded."""
+is away while the failure (or a success) is recorded, on SQLite and PostgreSQL."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -21,7 +22,6 @@ from sqlalchemy.orm import Session
 from app.calib import scene, synthetic
 from app.calib.pipeline import CourtNotFound
 from app.db import queue, repo
-from app.db.migrate import upgrade_head
 from app.db.models import (
     AttemptOutcome,
     Calibration,
@@ -34,7 +34,6 @@ from app.db.models import (
 from app.db.session import make_engine, make_sessionmaker
 from app.media import MediaError, media_store
 from app.settings import Settings
-from tests.service.conftest import make_settings
 from tests.service.test_queue import add_jobs, job_row
 from worker import main as worker_main
 from worker.errors import classify
@@ -75,17 +74,10 @@ def test_a_value_error_is_ours_not_invalid_input() -> None:
 
 
 @pytest.fixture
-def settings(tmp_path: Path) -> Settings:
-    # a short lease: recording a failure is given up after one lease
-    s = make_settings(
-        tmp_path / "data",
-        lease_s=1.0,
-        heartbeat_s=0.3,
-        progress_interval_s=0.1,
-        retry_backoff_s=30.0,
-    )
-    upgrade_head(s)
-    return s
+def settings(new_settings: Callable[..., Settings]) -> Settings:
+    # a short lease: recording a failure or a success is given up after one lease. On SQLite, or
+    # also on PostgreSQL for the tests marked both_databases
+    return new_settings(lease_s=1.0, heartbeat_s=0.3, progress_interval_s=0.1, retry_backoff_s=30.0)
 
 
 def run_failing_job(settings: Settings, exc: Exception, monkeypatch) -> tuple[str, str]:
@@ -106,6 +98,7 @@ def run_failing_job(settings: Settings, exc: Exception, monkeypatch) -> tuple[st
         engine.dispose()
 
 
+@pytest.mark.both_databases
 def test_a_bug_is_logged_with_its_traceback_and_retried_after_a_backoff(
     settings: Settings, monkeypatch, caplog
 ) -> None:
@@ -126,6 +119,7 @@ def test_a_bug_is_logged_with_its_traceback_and_retried_after_a_backoff(
         engine.dispose()
 
 
+@pytest.mark.both_databases
 def test_a_failure_is_recorded_once_the_database_is_back(
     settings: Settings, monkeypatch, caplog
 ) -> None:
@@ -149,6 +143,7 @@ def test_a_failure_is_recorded_once_the_database_is_back(
         engine.dispose()
 
 
+@pytest.mark.both_databases
 def test_a_database_away_for_good_does_not_kill_the_worker(settings: Settings, monkeypatch) -> None:
     def finish_failure_down(*args, **kwargs):
         raise db_down()
@@ -193,6 +188,7 @@ def queue_a_job_of_court_images(settings: Settings) -> str:
     return job_id
 
 
+@pytest.mark.both_databases
 def test_a_success_is_stored_once_the_database_is_back(settings: Settings, caplog) -> None:
     """The connection drops while the finished calibration is stored: first its INSERT fails,
     then the COMMIT goes through but its answer is lost. The worker tries again; the job ends
