@@ -306,3 +306,9 @@ def failed_job_ids_finished_before(session: Session, cutoff: datetime) -> list[s
 
 def existing_job_ids(session: Session, job_ids: Sequence[str]) -> set[str]:
     return set(session.scalars(select(Job.id).where(Job.id.in_(list(job_ids)))))
+
+
+def existing_calibration_ids(session: Session, calibration_ids: Sequence[str]) -> set[str]:
+    return set(
+        session.scalars(select(Calibration.id).where(Calibration.id.in_(list(calibration_ids))))
+    )
