@@ -195,12 +195,17 @@ def create_court(session: Session, tenant_id: str, name: str, spec: str) -> Cour
     return court
 
 
-def list_calibrations(session: Session, tenant_id: str, court_id: str) -> Sequence[Calibration]:
+def list_calibrations(
+    session: Session, tenant_id: str, court_id: str, limit: int, offset: int = 0
+) -> Sequence[Calibration]:
+    """One page of the court's calibrations, newest first (ties by id: pages do not overlap)."""
     court = get_owned(session, Court, tenant_id, court_id)
     return session.scalars(
         select(Calibration)
         .where(Calibration.court_id == court.id, Calibration.tenant_id == tenant_id)
-        .order_by(Calibration.created_at.desc())
+        .order_by(Calibration.created_at.desc(), Calibration.id)
+        .limit(limit)
+        .offset(offset)
     ).all()
 
 
