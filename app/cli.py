@@ -16,9 +16,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "keys": ("app.cli_service", "manage API keys"),
 }
 
-# commands that use the tables: checked for a migrated database before they run (`run` migrates
-# by itself, `serve` answers /readyz with the same advice, `calibrate` uses no database)
-NEEDS_SCHEMA = frozenset({"keys", "worker"})
+# commands that use the tables: checked for a migrated database before they run, so that a fresh
+# data dir gets the command to run instead of a traceback or a server answering 503 (`run`
+# migrates by itself, `calibrate` uses no database)
+NEEDS_SCHEMA = frozenset({"keys", "worker", "serve"})
+# ... but these start while the database is unreachable: the API answers 503 with Retry-After
+# until it is back (a database still starting, or restarted), and recovers by itself
+START_WITHOUT_DATABASE = frozenset({"serve"})
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -42,7 +46,9 @@ def main(argv: list[str] | None = None) -> int:
         from app.db.migrate import schema_problem
         from app.settings import get_settings
 
-        problem = schema_problem(get_settings())
+        problem = schema_problem(
+            get_settings(), unreachable_ok=args.command in START_WITHOUT_DATABASE
+        )
         if problem is not None:
             print(f"squashcal {args.command}: {problem}", file=sys.stderr)
             return 2

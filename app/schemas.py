@@ -247,6 +247,7 @@ class PageConfig(BaseModel):
 
 class CalibrationList(BaseModel):
     calibrations: list[CalibrationOut]
+    next_offset: int | None = Field(description="`offset` of the next page; null on the last page")
 
 
 class ProjectRequest(StrictModel):

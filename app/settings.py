@@ -19,7 +19,8 @@ class Settings(BaseSettings):
     media_root: Path | None = None
     # Media sweep (by every API process, at start and then every interval): uploads of failed jobs
     # after the retention period, and job folders without a job (an upload cut off by a crash)
-    # once nothing has been written to them for the grace period.
+    # and calibration folders without a calibration (a worker killed while storing it) once
+    # nothing has been written to them for the grace period (keep it well above lease_s).
     failed_media_retention_s: float = Field(default=7 * 24 * 3600.0, ge=0)
     orphan_media_grace_s: float = Field(default=3600.0, ge=0)
     media_sweep_interval_s: float = Field(default=3600.0, gt=0)

@@ -4,7 +4,7 @@
 
 Renders an upload (PNG frames of a court with two players moving, app.calib.scene), then in a
 fresh process each runs the worker's background step on it:
-- whole: every image decoded into memory (`load_images`), then `background_from_frames`;
+- whole: every image decoded into memory (after the same checks), then `background_from_frames`;
 - streamed: images decoded one at a time into a FrameSpool (a temporary file), then
   `background_from_bands` (a band of rows of every frame at a time): what the worker does.
 Prints each one's peak RSS (VmHWM), its RSS before decoding (imports), the time, and whether the
@@ -46,7 +46,7 @@ def child(mode: str, directory: Path) -> None:
     import numpy as np
 
     from app.calib import background
-    from app.media import frames
+    from app.media import frames, probe
     from app.settings import Settings
 
     paths = sorted(directory.glob("*.png"))
@@ -54,7 +54,8 @@ def child(mode: str, directory: Path) -> None:
     before = _status_mb("VmRSS")
     began = time.perf_counter()
     if mode == "whole":
-        images = frames.load_images(paths, settings)
+        probe.checked_image_sizes(paths, settings)
+        images = [probe.decode_image(path, i) for i, path in enumerate(paths)]
         bg, mask = background.background_from_frames(images)
         del images
     else:

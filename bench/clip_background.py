@@ -127,13 +127,12 @@ def _write_clips(size: tuple[int, int], seconds: float, directory: Path) -> list
 def _measure(path: str, n_frames: int, old: bool, background_out: str) -> dict:
     """Run in a child process: one clip to background; timings, peak RSS and the shots."""
     from app.calib.background import background_from_clip, background_from_frames
-    from app.media.frames import sample_video_frames
 
     rss_after_imports = _peak_rss_mb()
     start = time.perf_counter()
     cpu_start = time.process_time()
     if old:
-        frames = sample_video_frames(Path(path), n_frames, 1e9, (1 << 16, 1 << 16))
+        frames = _seek_frames(path, n_frames)
         decoded = time.perf_counter()
         background, moving = background_from_frames(frames)
         info = {"timings_s": {"decode": decoded - start, "segmentation": 0.0}}
@@ -151,6 +150,22 @@ def _measure(path: str, n_frames: int, old: bool, background_out: str) -> dict:
         "moving_fraction": float((moving > 0).mean()),
         "info": info,
     }
+
+
+def _seek_frames(path: str, n_frames: int) -> list[np.ndarray]:
+    """What the worker did before: `n_frames` frames spread over the whole clip, by seeking."""
+    capture = cv2.VideoCapture(path)
+    try:
+        n_total = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+        frames = []
+        for index in np.unique(np.round(np.linspace(0, n_total - 1, n_frames)).astype(int)):
+            capture.set(cv2.CAP_PROP_POS_FRAMES, float(index))
+            ok, frame = capture.read()
+            if ok and frame is not None:
+                frames.append(frame)
+    finally:
+        capture.release()
+    return frames
 
 
 def _measure_in_child(path: Path, n_frames: int, old: bool, background_out: Path) -> dict:

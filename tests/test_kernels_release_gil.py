@@ -1,6 +1,8 @@
 """The compiled kernels a calibration spends seconds in release the GIL: the worker's heartbeat
 thread must renew the job's lease while a search runs, or a live worker loses its job to
-another (at 1080p one call of the coarse ranking holds the interpreter for seconds)."""
+another (at 1080p one call of the coarse ranking holds the interpreter for seconds). So do those
+of /project's pixel -> floor (undistortion, the ray's plane), which the API runs in its thread
+pool beside other requests."""
 
 import pytest
 
@@ -21,6 +23,8 @@ LONG_KERNELS = [
     camera._extrinsics_all,
     camera._project_all,
     camera._fold_radii_njit,
+    camera._undistort_njit,
+    camera._pixels_to_plane_njit,
     segments._link,
 ]
 

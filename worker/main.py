@@ -280,7 +280,7 @@ def process_job(
         )
         # no renewals past here: one landing after the final write would report a lost lease
         heartbeat.stop()
-        queue.finish_success(engine, job, worker_id, calibration, _rounded(timings))
+        _store_success(engine, settings, job, worker_id, calibration, _rounded(timings))
         cal_dir = None  # committed: keep the images
         log.info("job %s succeeded: calibration %s", job.id, calibration_id)
         return "succeeded"
@@ -345,6 +345,26 @@ def _rounded(timings: dict[str, float]) -> dict[str, float]:
     return {k: round(float(v), 4) for k, v in timings.items()}
 
 
+def _store_success(
+    engine: Engine,
+    settings: Settings,
+    job: queue.ClaimedJob,
+    worker_id: str,
+    calibration: Calibration,
+    timings: dict[str, float],
+) -> None:
+    """Store the finished calibration, retried while the database is away (as a failure is):
+    the work is done, and a dropped connection must not throw it away and burn the attempt.
+    Raises LeaseLost, or the last error once a lease has passed (the job is then failed as a
+    database error, or claimed again when its lease has run out)."""
+    retry_db_write(
+        lambda: queue.finish_success(engine, job, worker_id, calibration, timings),
+        f"storing the calibration of job {job.id}",
+        # past the lease another worker may claim the job: our result would be refused anyway
+        give_up_after_s=settings.lease_s,
+    )
+
+
 def _fail(
     engine: Engine,
     settings: Settings,
@@ -354,7 +374,8 @@ def _fail(
     timings: dict[str, float],
     t_start: float,
 ) -> str:
-    """Record the failure (retried while the database is away). Returns the job's new status, or
+    """Record the failure (retried while the database is away, as a success is). Returns the
+    job's new status, or
     "lost" (another worker owns it now) or "unrecorded" (gave up: the lease will expire and the
     job be claimed again)."""
     timings["total"] = time.perf_counter() - t_start

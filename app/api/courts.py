@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from collections.abc import Sequence
+from typing import Annotated, TypeVar
 
 from fastapi import APIRouter, Query
 
@@ -27,22 +28,29 @@ def create_court(body: CourtCreate, session: SessionDep, tenant_id: TenantDep) -
 MAX_PAGE = 500
 # far beyond any real list, and small enough for every database's integer OFFSET
 MAX_OFFSET = 1_000_000_000
+# a paged list's query parameters: GET /courts, GET /courts/{id}/calibrations
+PageLimit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="items per page")]
+PageOffset = Annotated[
+    int, Query(ge=0, le=MAX_OFFSET, description="items to skip: the previous `next_offset`")
+]
+T = TypeVar("T")
+
+
+def _page(rows: Sequence[T], limit: int, offset: int) -> tuple[Sequence[T], int | None]:
+    """The page and the next page's offset (None on the last page) from `limit + 1` rows read
+    at `offset`: the extra row tells whether another page exists without a COUNT query."""
+    return rows[:limit], (offset + limit if len(rows) > limit else None)
 
 
 @router.get("", response_model=CourtList)
 def list_courts(
-    session: SessionDep,
-    tenant_id: TenantDep,
-    limit: Annotated[int, Query(ge=1, le=MAX_PAGE, description="courts per page")] = 100,
-    offset: Annotated[
-        int, Query(ge=0, le=MAX_OFFSET, description="courts to skip: the previous `next_offset`")
-    ] = 0,
+    session: SessionDep, tenant_id: TenantDep, limit: PageLimit = 100, offset: PageOffset = 0
 ) -> CourtList:
     """The tenant's courts, oldest first, one page at a time: follow `next_offset` until null."""
-    # one extra row tells whether another page exists without a COUNT query
-    rows = repo.list_courts(session, tenant_id, limit + 1, offset)
-    next_offset = offset + limit if len(rows) > limit else None
-    return CourtList(courts=[court_out(c) for c in rows[:limit]], next_offset=next_offset)
+    rows, next_offset = _page(
+        repo.list_courts(session, tenant_id, limit + 1, offset), limit, offset
+    )
+    return CourtList(courts=[court_out(c) for c in rows], next_offset=next_offset)
 
 
 @router.get("/{court_id}", response_model=CourtOut)
@@ -64,11 +72,20 @@ def get_camera(court_id: str, session: SessionDep, tenant_id: TenantDep) -> Cali
 
 
 @router.get("/{court_id}/calibrations", response_model=CalibrationList)
-def list_calibrations(court_id: str, session: SessionDep, tenant_id: TenantDep) -> CalibrationList:
+def list_calibrations(
+    court_id: str,
+    session: SessionDep,
+    tenant_id: TenantDep,
+    limit: PageLimit = 100,
+    offset: PageOffset = 0,
+) -> CalibrationList:
+    """The court's calibrations, newest first, one page at a time: follow `next_offset` until
+    null."""
     court = repo.get_owned(session, Court, tenant_id, court_id)
+    rows, next_offset = _page(
+        repo.list_calibrations(session, tenant_id, court.id, limit + 1, offset), limit, offset
+    )
     return CalibrationList(
-        calibrations=[
-            calibration_out(c, active=c.id == court.active_calibration_id)
-            for c in repo.list_calibrations(session, tenant_id, court_id)
-        ]
+        calibrations=[calibration_out(c, active=c.id == court.active_calibration_id) for c in rows],
+        next_offset=next_offset,
     )

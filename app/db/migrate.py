@@ -49,8 +49,9 @@ def current_revision(engine: Engine) -> str | None:
         return MigrationContext.configure(conn).get_current_revision()
 
 
-def schema_problem(settings: Settings) -> str | None:
-    """Why the database cannot serve this code yet (a sentence saying what to run), else None.
+def schema_problem(settings: Settings, unreachable_ok: bool = False) -> str | None:
+    """Why the database cannot serve this code yet (a sentence saying what to run), else None
+    (also when the database cannot be reached and `unreachable_ok`).
 
     Commands that read or write tables check this first, so a fresh data directory gets advice
     instead of a SQLAlchemy traceback.
@@ -64,6 +65,8 @@ def schema_problem(settings: Settings) -> str | None:
     try:
         revision = current_revision(engine)
     except Exception as exc:
+        if unreachable_ok:
+            return None
         return f"cannot reach the database at {where} ({type(exc).__name__}): is it running?"
     finally:
         engine.dispose()

@@ -127,6 +127,9 @@ class Tenant(Base):
     id: Mapped[str] = mapped_column(String(32), primary_key=True, default=new_id)
     name: Mapped[str] = mapped_column(String(200))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    # when a worker last took one of the tenant's jobs (the queue's turns across tenants); None
+    # until the first claim
+    last_claimed_at: Mapped[datetime | None] = mapped_column(default=None)
 
 
 class ApiKey(Base):

@@ -2,18 +2,26 @@
 
 Every state change updates only rows in the state it expects (status and owning worker), so a worker
 whose lease expired and whose job was re-claimed elsewhere cannot overwrite the new owner's work.
-Claims are fair across tenants: the next job is the oldest of the tenant with the fewest running
-jobs. On PostgreSQL two workers claiming at the same instant may both count the same running jobs,
-so fairness is approximate there; exclusivity is not. Claims are atomic: on SQLite the transaction starts with BEGIN IMMEDIATE (one writer at a time, so
-the select-then-update inside one UPDATE statement cannot race); on PostgreSQL the candidate row is
-locked with FOR UPDATE SKIP LOCKED so concurrent workers pick different jobs without waiting.
+Claims take turns across tenants: the next job is the oldest of the tenant with the fewest running
+jobs and, among tenants equal in that, the one whose last claim is the oldest (never claimed:
+first); each claim records its time on the tenant's row (tenants.last_claimed_at). The running
+count shares the workers out; the turns matter when it is even, as with one worker (the
+default), where every tenant has nothing running at each claim: tenant A's pile of three then
+goes A, B, A, A when B's one job came after them, not A, A, A, B. On PostgreSQL two workers
+claiming at the same instant may both see the same counts and turns, so fairness is approximate
+there; exclusivity is not. Claims are atomic: on SQLite the transaction starts with BEGIN
+IMMEDIATE (one writer at a time, so the select-then-update inside one UPDATE statement cannot
+race, and each claim sees the turns of the one before); on PostgreSQL the candidate row is locked
+with FOR UPDATE SKIP LOCKED so concurrent workers pick different jobs without waiting.
 
 Every claim opens a row of job_attempts, and whatever ends the attempt closes it, in the same
 transaction as the change to the job: finishing, failing, giving the job back, or, for a worker
 whose lease ran out, the claim that takes the job again (or fails it as worker_lost). So the
 attempts table says who held which job when, and never disagrees with the jobs table. Each of those
 transactions changes the jobs row before the job's attempts, so on PostgreSQL they queue on the job
-row and cannot deadlock over attempts.
+row and cannot deadlock over attempts. A claim writes its tenant's row last, after which it waits
+for nothing: claims of one tenant queue there for a moment and cannot deadlock (uploads only
+share-lock the row for their foreign key, which that write does not block).
 """
 
 from __future__ import annotations
@@ -33,6 +41,7 @@ from app.db.models import (
     JobAttempt,
     JobStage,
     JobStatus,
+    Tenant,
     utcnow,
 )
 from app.db.session import write_engine
@@ -101,6 +110,16 @@ def _running_jobs_of_the_same_tenant(now: datetime) -> Any:
     )
 
 
+def _last_claim_of_the_same_tenant() -> Any:
+    """For a candidate row of `jobs`: when its tenant last had a job claimed (None: never)."""
+    return (
+        select(Tenant.last_claimed_at)
+        .where(Tenant.id == Job.tenant_id)
+        .correlate(Job)
+        .scalar_subquery()
+    )
+
+
 def _open_attempt(
     session: Session, job_id: str, attempt: int, worker_id: str, now: datetime
 ) -> None:
@@ -152,8 +171,9 @@ def claim(
     engine: Engine, worker_id: str, lease_s: float, now: datetime | None = None
 ) -> ClaimedJob | None:
     """Atomically take a claimable job (queued and due, or running with an expired lease): the
-    oldest of the tenant with the fewest running jobs, so that one tenant's pile of uploads does
-    not hold back another tenant's single one."""
+    oldest of the tenant with the fewest running jobs and, among those, the longest since its
+    last claim, so that one tenant's pile of uploads does not hold back another tenant's single
+    one (whether several workers run or one)."""
     given = now
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
         now = _now_under_lock(session, given)
@@ -185,7 +205,12 @@ def claim(
         candidate = (
             select(Job.id)
             .where(or_(_due(now), _expired(now)), Job.attempts < Job.max_attempts)
-            .order_by(_running_jobs_of_the_same_tenant(now), Job.created_at, Job.id)
+            .order_by(
+                _running_jobs_of_the_same_tenant(now),
+                _last_claim_of_the_same_tenant().nulls_first(),
+                Job.created_at,
+                Job.id,
+            )
             .limit(1)
             .with_for_update(skip_locked=True)
             .scalar_subquery()
@@ -216,6 +241,13 @@ def claim(
         # out of the running state closes its attempt in its own transaction.
         _close_lost_attempts(session, [job.id], now)
         _open_attempt(session, job.id, job.attempts, worker_id, now)
+        # the tenant's turn is taken; written last (see the module's note on locks)
+        session.execute(
+            update(Tenant)
+            .where(Tenant.id == job.tenant_id)
+            .values(last_claimed_at=now)
+            .execution_options(synchronize_session=False)
+        )
         court = session.get(Court, job.court_id)
         if court is None:  # FK cascade makes this impossible short of manual surgery
             raise RuntimeError(f"job {job.id} refers to a missing court {job.court_id}")
@@ -280,6 +312,10 @@ def finish_success(
     """Store the calibration, mark the job succeeded and make it the court's active camera: one
     transaction. The court's camera only moves forward: an older upload finishing late does not
     replace the camera of a newer one. Raises LeaseLost (and stores nothing) if the job is not ours.
+
+    Safe to call again with the same calibration after an error (the worker retries it): when the
+    connection dropped after the database committed but before it said so, the job has already
+    succeeded with this calibration, and the call does nothing more.
     """
     with Session(write_engine(engine), expire_on_commit=False) as session, session.begin():
         now = _now_under_lock(session, now)
@@ -301,6 +337,13 @@ def finish_success(
             .execution_options(synchronize_session=False)
         )
         if not result.rowcount:  # type: ignore[attr-defined]
+            stored = session.scalar(
+                select(Job.calibration_id).where(
+                    Job.id == job.id, Job.status == JobStatus.SUCCEEDED
+                )
+            )
+            if stored == calibration.id:  # an earlier call committed it (ids are never reused)
+                return
             raise LeaseLost(f"job {job.id} is no longer running under worker {worker_id}")
         _close_own_attempt(session, job.id, worker_id, AttemptOutcome.SUCCEEDED, now)
         # Lock the court before inserting the calibration: the insert's foreign-key check takes a

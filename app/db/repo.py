@@ -195,12 +195,17 @@ def create_court(session: Session, tenant_id: str, name: str, spec: str) -> Cour
     return court
 
 
-def list_calibrations(session: Session, tenant_id: str, court_id: str) -> Sequence[Calibration]:
+def list_calibrations(
+    session: Session, tenant_id: str, court_id: str, limit: int, offset: int = 0
+) -> Sequence[Calibration]:
+    """One page of the court's calibrations, newest first (ties by id: pages do not overlap)."""
     court = get_owned(session, Court, tenant_id, court_id)
     return session.scalars(
         select(Calibration)
         .where(Calibration.court_id == court.id, Calibration.tenant_id == tenant_id)
-        .order_by(Calibration.created_at.desc())
+        .order_by(Calibration.created_at.desc(), Calibration.id)
+        .limit(limit)
+        .offset(offset)
     ).all()
 
 
@@ -306,3 +311,9 @@ def failed_job_ids_finished_before(session: Session, cutoff: datetime) -> list[s
 
 def existing_job_ids(session: Session, job_ids: Sequence[str]) -> set[str]:
     return set(session.scalars(select(Job.id).where(Job.id.in_(list(job_ids)))))
+
+
+def existing_calibration_ids(session: Session, calibration_ids: Sequence[str]) -> set[str]:
+    return set(
+        session.scalars(select(Calibration.id).where(Calibration.id.in_(list(calibration_ids))))
+    )

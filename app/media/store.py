@@ -27,8 +27,10 @@ from app.settings import Settings
 
 
 @dataclass(frozen=True)
-class StoredJobDir:
-    job_id: str
+class StoredDir:
+    """A job's or a calibration's folder in the store."""
+
+    id: str  # the job's or the calibration's
     path: Path
     last_modified: float  # newest mtime of the folder and its files (seconds since the epoch)
 
@@ -42,7 +44,11 @@ class MediaStore(Protocol):
 
     def remove_job_dir(self, job_id: str) -> bool: ...
 
-    def job_dirs(self) -> Iterator[StoredJobDir]: ...
+    def remove_calibration_dir(self, calibration_id: str) -> bool: ...
+
+    def job_dirs(self) -> Iterator[StoredDir]: ...
+
+    def calibration_dirs(self) -> Iterator[StoredDir]: ...
 
     def persist(self, directory: Path) -> None: ...
 
@@ -66,19 +72,16 @@ class LocalMediaStore:
         return path
 
     def remove_job_dir(self, job_id: str) -> bool:
-        path = self.job_dir(job_id)
-        if not path.exists():
-            return False
-        shutil.rmtree(path, ignore_errors=True)
-        return True
+        return _remove(self.job_dir(job_id))
 
-    def job_dirs(self) -> Iterator[StoredJobDir]:
-        root = self.root / "jobs"
-        if not root.is_dir():
-            return
-        for path in root.iterdir():
-            if path.is_dir():
-                yield StoredJobDir(path.name, path, _newest_mtime(path))
+    def remove_calibration_dir(self, calibration_id: str) -> bool:
+        return _remove(self.calibration_dir(calibration_id))
+
+    def job_dirs(self) -> Iterator[StoredDir]:
+        return _dirs(self.root / "jobs")
+
+    def calibration_dirs(self) -> Iterator[StoredDir]:
+        return _dirs(self.root / "calibrations")
 
     def persist(self, directory: Path) -> None:
         fsync_tree(directory)
@@ -89,6 +92,21 @@ def _safe_id(resource_id: str) -> str:
     if not resource_id.replace("-", "").replace("_", "").isalnum():
         raise ValueError(f"not a media id: {resource_id!r}")
     return resource_id
+
+
+def _remove(path: Path) -> bool:
+    if not path.exists():
+        return False
+    shutil.rmtree(path, ignore_errors=True)
+    return True
+
+
+def _dirs(root: Path) -> Iterator[StoredDir]:
+    if not root.is_dir():
+        return
+    for path in root.iterdir():
+        if path.is_dir():
+            yield StoredDir(path.name, path, _newest_mtime(path))
 
 
 def _newest_mtime(directory: Path) -> float:
@@ -127,5 +145,5 @@ def fsync_tree(directory: Path) -> None:
             os.close(fd)
 
 
-def age_s(stored: StoredJobDir, now: float | None = None) -> float:
+def age_s(stored: StoredDir, now: float | None = None) -> float:
     return (time.time() if now is None else now) - stored.last_modified

@@ -456,6 +456,8 @@ class JobCard {
     const node = this.node;
     node.classList.toggle("succeeded", job.status === "succeeded");
     node.classList.toggle("failed", job.status === "failed");
+    // running, but its worker stopped renewing the lease (killed, or cut off): say so
+    node.classList.toggle("stale", job.status === "running" && job.stale);
     const index = STAGES.indexOf(job.stage);
     const failed = job.status === "failed";
     this.stages.querySelectorAll("li").forEach((li, i) => {
@@ -475,6 +477,12 @@ class JobCard {
     if (job.status === "queued") {
       this.status.textContent = job.attempts ? "Waiting for a worker to take it up again" : STAGE_WORDS.queued;
       this.timing.textContent = "";
+    } else if (job.status === "running" && job.stale) {
+      this.status.textContent = job.attempts < job.max_attempts
+        ? "The worker stopped responding: the job will be retried by another worker"
+        : "The worker stopped responding, and the job has used all its attempts: it will be marked failed";
+      const quiet = job.heartbeat_at ? Math.max(0, (Date.now() - Date.parse(job.heartbeat_at)) / 1000) : null;
+      this.timing.textContent = quiet !== null ? `no sign of it for ${seconds(quiet)} (attempt ${job.attempts} of ${job.max_attempts})` : "";
     } else if (job.status === "running") {
       let words = STAGE_WORDS[job.stage] || job.stage;
       if (job.stage === "optimising") {

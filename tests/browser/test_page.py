@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import json
 import time
+from datetime import timedelta
 from pathlib import Path
 
 import cv2
@@ -20,8 +21,13 @@ import pytest
 from playwright.sync_api import Route
 
 from app.calib import camera, cases
+from app.db import queue, repo
+from app.db.models import new_id, utcnow
+from app.db.session import make_engine, make_sessionmaker
+from app.settings import Settings
 from tests import renderer
 from tests.browser.conftest import Session, open_page
+from tests.service.test_e2e import LiveService
 
 pytestmark = [pytest.mark.e2e, pytest.mark.browser]
 
@@ -418,3 +424,50 @@ def test_failed_job_says_why_and_what_to_refilm(browser, live, tmp_path: Path) -
     assert card.locator(".stages li.failed").count() == 1
     s.shot("01-failed-job")
     assert s.problems.all() == []
+
+
+def test_a_job_whose_worker_stopped_responding_says_so(browser, tmp_path: Path) -> None:
+    """A running job whose worker was killed (its lease ran out: `stale` in GET /jobs/{id}) says
+    that the worker stopped responding and that the job will be retried. The API runs without a
+    worker here, so nothing takes the job up again while the page shows it."""
+    data_dir = tmp_path / "data"
+    service = LiveService(data_dir)
+    try:
+        service.start_api()
+        key = service.cli("keys", "create", "--name", "coach").strip().splitlines()[-1]
+        auth = {"Authorization": f"Bearer {key}"}
+        court = httpx.post(f"{service.url}/courts", json={"name": "Club court"}, headers=auth)
+        assert court.status_code == 201, court.text
+        engine = make_engine(Settings(data_dir=data_dir))
+        try:
+            with make_sessionmaker(engine).begin() as session:
+                tenant_id = repo.tenant_for_key(session, key)
+                assert tenant_id is not None
+                repo.new_job(
+                    session,
+                    job_id=new_id(),
+                    tenant_id=tenant_id,
+                    court_id=court.json()["id"],
+                    media_kind="video",
+                    media_files=["000.mp4"],
+                    params={},
+                    max_attempts=3,
+                )
+            # its worker was SIGKILLed just after renewing a 10 s lease, 15 s ago
+            assert queue.claim(engine, "killed", lease_s=10, now=utcnow() - timedelta(seconds=15))
+        finally:
+            engine.dispose()
+
+        s = open_page(browser, service.url, 1280, "stale-job")
+        page = s.page
+        page.goto(service.url + "/")
+        page.fill("#key", key)
+        page.click("#key-form button")
+        page.wait_for_selector("#jobs li.job.stale")
+        text = page.locator("#jobs li.job").first.inner_text()
+        assert "The worker stopped responding: the job will be retried" in text, text
+        assert "attempt 1 of 3" in text, text
+        s.shot("01-stale-job")
+        assert s.problems.all() == []
+    finally:
+        service.stop()

@@ -1,4 +1,5 @@
-"""Player-free background from frames, and sampling frames over a clip."""
+"""Player-free background from frames, whole or a band of rows at a time from a spool of an
+upload's images. (A clip's frames: tests/test_shots.py.)"""
 
 from __future__ import annotations
 
@@ -72,46 +73,6 @@ def test_frames_must_agree_in_size_and_type() -> None:
         background.background_from_frames([a, a], method="mode")
 
 
-def test_frame_indices_span_the_clip() -> None:
-    np.testing.assert_array_equal(worker_media.frame_indices(101, 5), [0, 25, 50, 75, 100])
-    np.testing.assert_array_equal(worker_media.frame_indices(3, 15), [0, 1, 2])
-
-
-def _numbered_clip(tmp_path: Path, n_frames: int) -> Path:
-    """Frame i is a flat grey of brightness i (so a decoded frame tells which one it is)."""
-    frames = [np.full((48, 64, 3), i, np.uint8) for i in range(n_frames)]
-    path = tmp_path / "numbered.mp4"
-    scene.write_video(frames, path)
-    return path
-
-
-def test_video_frames_are_sampled_over_the_whole_clip(tmp_path: Path) -> None:
-    path = _numbered_clip(tmp_path, 200)
-    frames = worker_media.sample_video_frames(path, 5, max_duration_s=60, max_size=(100, 100))
-    brightness = [float(f.mean()) for f in frames]
-    # codecs shift flat greys by a few levels; samples are 50 frames apart
-    np.testing.assert_allclose(brightness, [0, 50, 100, 149, 199], atol=6)
-
-
-def test_sequential_fallback_keeps_a_spread_sample(tmp_path: Path) -> None:
-    path = _numbered_clip(tmp_path, 200)
-    capture = cv2.VideoCapture(str(path))
-    try:
-        frames = worker_media._read_sequentially(capture, 5, max_duration_s=60, fps=25)
-    finally:
-        capture.release()
-    brightness = np.array([float(f.mean()) for f in frames])
-    assert len(frames) == 5
-    assert brightness[0] < 3 and brightness[-1] > 150
-    assert np.all(np.diff(brightness) > 20)
-
-
-def test_duration_limit_applies_when_sampling(tmp_path: Path) -> None:
-    path = _numbered_clip(tmp_path, 200)  # 8 s at 25 fps
-    frames = worker_media.sample_video_frames(path, 3, max_duration_s=2.0, max_size=(100, 100))
-    assert max(float(f.mean()) for f in frames) < 55  # nothing after 2 s (frame 50)
-
-
 @pytest.mark.parametrize("n_frames, band_rows", [(9, 16), (8, 7), (2, 270), (3, 1000)])
 def test_the_banded_background_is_identical_to_the_whole_frame_one(
     clip, n_frames: int, band_rows: int
@@ -169,7 +130,7 @@ def test_spooled_images_give_the_same_background_as_decoded_ones(clip, tmp_path:
         cv2.imwrite(str(path), frame)
         paths.append(path)
     settings = Settings(data_dir=tmp_path / "data")
-    want = background.background_from_frames(worker_media.load_images(paths, settings))
+    want = background.background_from_frames([cv2.imread(str(path)) for path in paths])
     with worker_media.spool_images(paths, settings) as spool:
         got = background.background_from_bands(
             spool.n_frames, spool.height, spool.width, spool.read_rows

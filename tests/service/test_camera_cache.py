@@ -1,22 +1,25 @@
-"""The /project hot path does no database work, and still sees new calibrations."""
+"""The /project hot path does no database work, and still sees new calibrations (on SQLite and
+PostgreSQL)."""
 
 from __future__ import annotations
 
 import time
-from pathlib import Path
+from collections.abc import Callable
 
 import numpy as np
+import pytest
 from sqlalchemy import event
 
 from app.api.camera_cache import CameraCache
 from app.calib import camera, synthetic
 from app.db import queue, repo
-from app.db.migrate import upgrade_head
 from app.db.models import Calibration, new_id
 from app.db.session import make_engine, make_sessionmaker
 from app.main import create_app
 from app.settings import Settings
-from tests.service.conftest import api_client, make_settings
+from tests.service.conftest import api_client
+
+pytestmark = pytest.mark.both_databases
 
 SIZE = (1280, 720)
 
@@ -75,9 +78,10 @@ def setup_court(settings: Settings) -> tuple[str, str, str]:
     return key, tenant_id, court_id
 
 
-def test_cache_reads_no_database_and_refresh_picks_up_new_calibration(tmp_path: Path) -> None:
-    settings = make_settings(tmp_path / "data")
-    upgrade_head(settings)
+def test_cache_reads_no_database_and_refresh_picks_up_new_calibration(
+    new_settings: Callable[..., Settings],
+) -> None:
+    settings = new_settings()
     _, tenant_id, court_id = setup_court(settings)
     engine = make_engine(settings)
     counter = StatementCounter(engine)
@@ -107,9 +111,8 @@ def test_cache_reads_no_database_and_refresh_picks_up_new_calibration(tmp_path: 
     engine.dispose()
 
 
-def test_cache_is_bounded(tmp_path: Path) -> None:
-    settings = make_settings(tmp_path / "data")
-    upgrade_head(settings)
+def test_cache_is_bounded(new_settings: Callable[..., Settings]) -> None:
+    settings = new_settings()
     engine = make_engine(settings)
     with make_sessionmaker(engine).begin() as session:
         key_row, _ = repo.create_api_key(session, name="t")
@@ -127,9 +130,8 @@ def test_cache_is_bounded(tmp_path: Path) -> None:
     engine.dispose()
 
 
-def test_project_hot_path_reads_only_the_key(tmp_path: Path) -> None:
-    settings = make_settings(tmp_path / "data", camera_refresh_s=0.05)
-    upgrade_head(settings)
+def test_project_hot_path_reads_only_the_key(new_settings: Callable[..., Settings]) -> None:
+    settings = new_settings(camera_refresh_s=0.05)
     key, tenant_id, court_id = setup_court(settings)
     auth = {"Authorization": f"Bearer {key}"}
     genome = synthetic.typical_target_camera(SIZE)
@@ -165,13 +167,12 @@ def test_project_hot_path_reads_only_the_key(tmp_path: Path) -> None:
 
 
 def test_a_calibrations_own_project_reads_it_once_and_keeps_it_after_a_new_one(
-    tmp_path: Path,
+    new_settings: Callable[..., Settings],
 ) -> None:
     """/calibrations/{id}/project and /image-points: any calibration of the history, answered
     from memory after the first request (a calibration never changes), still the same camera
     after another one became active, and not another tenant's."""
-    settings = make_settings(tmp_path / "data", camera_refresh_s=3600)
-    upgrade_head(settings)
+    settings = new_settings(camera_refresh_s=3600)
     key, tenant_id, court_id = setup_court(settings)
     auth = {"Authorization": f"Bearer {key}"}
     first_genome = synthetic.typical_target_camera(SIZE)
@@ -212,9 +213,8 @@ def test_a_calibrations_own_project_reads_it_once_and_keeps_it_after_a_new_one(
             assert missing.status_code == 404, missing.text
 
 
-def test_project_answers_null_where_the_ray_misses(tmp_path: Path) -> None:
-    settings = make_settings(tmp_path / "data")
-    upgrade_head(settings)
+def test_project_answers_null_where_the_ray_misses(new_settings: Callable[..., Settings]) -> None:
+    settings = new_settings()
     key, tenant_id, court_id = setup_court(settings)
     auth = {"Authorization": f"Bearer {key}"}
     genome = synthetic.typical_target_camera(SIZE)
@@ -237,10 +237,9 @@ def test_project_answers_null_where_the_ray_misses(tmp_path: Path) -> None:
         assert len(response.json()["points"]) == 100_000
 
 
-def test_project_body_edge_cases(tmp_path: Path) -> None:
+def test_project_body_edge_cases(new_settings: Callable[..., Settings]) -> None:
     """/project reads its body in one pass (app.api.json_body): the edges still answer as before."""
-    settings = make_settings(tmp_path / "data")
-    upgrade_head(settings)
+    settings = new_settings()
     key, tenant_id, court_id = setup_court(settings)
     auth = {"Authorization": f"Bearer {key}"}
     genome = synthetic.typical_target_camera(SIZE)

@@ -594,6 +594,40 @@ def test_courts_are_listed_a_page_at_a_time(target: Target) -> None:
         assert_error(t.client.get(f"/courts?{bad}", headers=t.auth), 422, "invalid_request")
 
 
+def test_a_courts_calibrations_are_listed_a_page_at_a_time(target: Target) -> None:
+    t = target
+    genome = synthetic.typical_target_camera(SIZE)
+    imported = []
+    for i in range(5):
+        moved = genome.copy()
+        moved[camera.GENE["t_x"]] += 0.1 * i
+        response = t.client.post(
+            f"/courts/{t.court_id}/calibrations/import",
+            json={"camera": camera.to_opencv(moved, SIZE)},
+            headers=t.auth,
+        )
+        assert response.status_code == 201, response.text
+        imported.append(response.json()["id"])
+    seen: list[str] = []
+    offset: int | None = 0
+    while offset is not None:
+        page = t.client.get(
+            f"/courts/{t.court_id}/calibrations?limit=2&offset={offset}", headers=t.auth
+        ).json()
+        assert len(page["calibrations"]) <= 2
+        seen += [c["id"] for c in page["calibrations"]]
+        offset = page["next_offset"]
+    assert seen == imported[::-1]  # newest first, each once
+    whole = t.client.get(f"/courts/{t.court_id}/calibrations", headers=t.auth).json()
+    assert [c["id"] for c in whole["calibrations"]] == seen and whole["next_offset"] is None
+    assert [c["active"] for c in whole["calibrations"]] == [True] + [False] * 4
+    path = f"/courts/{t.court_id}/calibrations"
+    for bad in ("limit=0", "limit=501", "offset=-1", "offset=99999999999999999999", "limit=x"):
+        assert_error(t.client.get(f"{path}?{bad}", headers=t.auth), 422, "invalid_request")
+    other = t.client.get(f"/courts/{t.other_court_id}/calibrations?limit=2", headers=t.auth)
+    assert_error(other, 404)
+
+
 def test_key_lookup_on_both_databases(any_db_settings: Settings) -> None:
     engine = make_engine(any_db_settings)
     try:

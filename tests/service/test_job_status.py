@@ -1,16 +1,19 @@
 """What GET /jobs/{id} says about a job in the queue: its enums, whether its worker is alive, and
-every attempt at it."""
+every attempt at it (on SQLite and PostgreSQL)."""
 
 from __future__ import annotations
 
 from datetime import datetime, timedelta
 
 import httpx
+import pytest
 
 from app.db import queue, repo
 from app.db.models import AttemptOutcome, JobStage, JobStatus, new_id, utcnow
 from app.db.session import make_engine, make_sessionmaker
 from app.settings import Settings
+
+pytestmark = pytest.mark.both_databases
 
 
 def queued_job(settings: Settings) -> tuple[dict[str, str], str]:

@@ -49,12 +49,13 @@ def test_worker_applies_the_upload_checks_before_decoding(tmp_path: Path) -> Non
     """Media stored by an older API (or put there by hand) meets the same limits in the worker."""
     settings = make_settings(tmp_path / "data", max_upload_pixels=2 * 64 * 48)
     ok = [_write(tmp_path, f"00{i}.png", png_bytes(64, 48, seed=i)) for i in range(2)]
-    assert [f.shape for f in frames.load_images(ok, settings)] == [(48, 64, 3)] * 2
+    with frames.spool_images(ok, settings) as spool:
+        assert (spool.n_frames, spool.height, spool.width) == (2, 48, 64)
     three = [*ok, _write(tmp_path, "002.png", png_bytes(64, 48, seed=3))]
     with pytest.raises(probe.MediaError) as too_many:
-        frames.load_images(three, settings)
+        frames.spool_images(three, settings)
     assert (too_many.value.code, too_many.value.status) == ("too_many_pixels", 413)
     tiny = [_write(tmp_path, "tiny.png", png_bytes(1, 1))]
     with pytest.raises(probe.MediaError) as too_small:
-        frames.load_images(tiny, settings)
+        frames.spool_images(tiny, settings)
     assert too_small.value.code == "image_too_small"

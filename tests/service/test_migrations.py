@@ -2,21 +2,32 @@
 
 from __future__ import annotations
 
+from datetime import timedelta
 from pathlib import Path
 
 import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
-from sqlalchemy import CheckConstraint, inspect
+from sqlalchemy import CheckConstraint, insert, inspect, select, update
 
 from app.db import queue
 from app.db.migrate import alembic_config, current_revision, head_revision, upgrade_head
-from app.db.models import Base, JobStatus
+from app.db.models import (
+    Base,
+    Calibration,
+    Court,
+    Job,
+    JobAttempt,
+    JobStatus,
+    Tenant,
+    new_id,
+    utcnow,
+)
 from app.db.session import make_engine
 from app.settings import Settings
 from tests.service.conftest import make_settings, postgres_schema
-from tests.service.test_queue import add_jobs, job_row, make_calibration
+from tests.service.test_queue import job_row, make_calibration
 
 
 def _assert_schema_matches_models(settings: Settings) -> None:
@@ -60,15 +71,43 @@ def test_migrations_from_empty_postgres(tmp_path: Path) -> None:
         _assert_schema_matches_models(make_settings(tmp_path / "data", database_url=url))
 
 
+def _jobs_at_an_old_revision(engine, n: int) -> list[str]:
+    """A tenant, a court and `n` queued jobs written with the columns they have had since 0001
+    (an INSERT through the models names every column they have today)."""
+    tenant_id, court_id, job_ids = new_id(), new_id(), [new_id() for _ in range(n)]
+    now = utcnow()
+    with engine.begin() as conn:
+        conn.execute(insert(Tenant.__table__).values(id=tenant_id, name="t", created_at=now))
+        conn.execute(
+            insert(Court.__table__).values(
+                id=court_id, tenant_id=tenant_id, name="c", spec="wsf", created_at=now
+            )
+        )
+        for i, job_id in enumerate(job_ids):
+            conn.execute(
+                insert(Job.__table__).values(
+                    id=job_id,
+                    tenant_id=tenant_id,
+                    court_id=court_id,
+                    media_kind="images",
+                    media_files=["000.png"],
+                    params={},
+                    created_at=now + timedelta(milliseconds=i),
+                )
+            )
+    return job_ids
+
+
 def _assert_job_attempts_migrate_up_and_down_with_jobs(settings: Settings) -> None:
-    """0004 -> 0005 on a database with a job in it, work recorded in job_attempts, back down to
-    0004 (the table goes, the job stays) and up again."""
+    """0004 -> 0005 (and on to the head, which the queue's code needs) on a database with a job
+    in it, work recorded in job_attempts, back down to 0004 (the table goes, the job stays) and
+    up again."""
     config = alembic_config(settings)
     engine = make_engine(settings)
     try:
         command.upgrade(config, "0004")
-        _, [job_id] = add_jobs(engine, 1)
-        command.upgrade(config, "0005")
+        [job_id] = _jobs_at_an_old_revision(engine, 1)
+        upgrade_head(settings)
         job = queue.claim(engine, "w", lease_s=60)
         assert job is not None
         queue.finish_success(engine, job, "w", make_calibration(job), {})
@@ -95,6 +134,95 @@ def test_job_attempts_migrate_up_and_down_with_jobs_postgres(tmp_path: Path) -> 
     with postgres_schema() as url:
         settings = make_settings(tmp_path / "data", database_url=url)
         _assert_job_attempts_migrate_up_and_down_with_jobs(settings)
+
+
+def test_sqlite_table_rebuilds_keep_the_rows_that_reference_the_table(tmp_path: Path) -> None:
+    """On SQLite a batch migration rebuilds a table (copy, drop, rename), as 0006 and its
+    downgrade do with `jobs`. Dropping the old table must not cascade to the rows that reference
+    it (0006 used to delete every calibration and job attempt)."""
+    settings = make_settings(tmp_path / "data")
+    config = alembic_config(settings)
+    engine = make_engine(settings)
+    tables = ("tenants", "courts", "jobs", "job_attempts", "calibrations")
+
+    def counts() -> dict[str, int]:
+        with engine.connect() as conn:
+            return {t: conn.exec_driver_sql(f"SELECT count(*) FROM {t}").scalar() for t in tables}
+
+    try:
+        command.upgrade(config, "0005")
+        [job_id] = _jobs_at_an_old_revision(engine, 1)
+        with engine.begin() as conn:
+            tenant_id, court_id = conn.execute(
+                select(Job.tenant_id, Job.court_id).where(Job.id == job_id)
+            ).one()
+            conn.execute(
+                insert(JobAttempt.__table__).values(
+                    job_id=job_id, attempt=1, worker_id="w", claimed_at=utcnow()
+                )
+            )
+            conn.execute(
+                insert(Calibration.__table__).values(
+                    id=new_id(),
+                    tenant_id=tenant_id,
+                    court_id=court_id,
+                    job_id=job_id,
+                    spec="wsf",
+                    genome=[0.0] * 15,
+                    opencv={},
+                    fitness=1.0,
+                    quality={},
+                    result={},
+                    image_width=64,
+                    image_height=48,
+                )
+            )
+        before = counts()
+        assert set(before.values()) == {1}
+        upgrade_head(settings)
+        assert counts() == before
+        command.downgrade(config, "0005")
+        assert counts() == before
+        with engine.connect() as conn:  # and the connections that migrated still check them
+            assert conn.exec_driver_sql("PRAGMA foreign_keys").scalar() == 1
+    finally:
+        engine.dispose()
+
+
+def _assert_tenants_last_claim_is_filled_from_their_jobs(settings: Settings) -> None:
+    """0006 -> 0007: a tenant's last claim is the latest start of its jobs (null if none ran)."""
+    config = alembic_config(settings)
+    engine = make_engine(settings)
+    try:
+        command.upgrade(config, "0006")
+        first, second = _jobs_at_an_old_revision(engine, 2)
+        _jobs_at_an_old_revision(engine, 1)  # another tenant, never served
+        started = utcnow() - timedelta(minutes=5)
+        with engine.begin() as conn:
+            for job_id, at in ((first, started), (second, started + timedelta(seconds=30))):
+                conn.execute(update(Job).where(Job.id == job_id).values(started_at=at))
+        command.upgrade(config, "0007")
+        with engine.connect() as conn:
+            turns = conn.execute(select(Tenant.last_claimed_at).order_by(Tenant.created_at)).all()
+        assert [row[0] for row in turns] == [started + timedelta(seconds=30), None]
+        command.downgrade(config, "0006")
+        with engine.connect() as conn:
+            assert "last_claimed_at" not in {
+                c["name"] for c in inspect(conn).get_columns("tenants")
+            }
+    finally:
+        engine.dispose()
+
+
+def test_tenants_last_claim_is_filled_from_their_jobs_sqlite(tmp_path: Path) -> None:
+    _assert_tenants_last_claim_is_filled_from_their_jobs(make_settings(tmp_path / "data"))
+
+
+@pytest.mark.postgres
+def test_tenants_last_claim_is_filled_from_their_jobs_postgres(tmp_path: Path) -> None:
+    with postgres_schema() as url:
+        settings = make_settings(tmp_path / "data", database_url=url)
+        _assert_tenants_last_claim_is_filled_from_their_jobs(settings)
 
 
 def test_models_differ_from_an_unmigrated_database(tmp_path: Path) -> None:

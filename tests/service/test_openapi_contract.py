@@ -54,6 +54,10 @@ def test_schema_details_match_the_server(client: httpx.Client) -> None:
     assert set(create["enum"]) == set(COURT_SPECS)
     listing = document["paths"]["/courts"]["get"]
     assert {p["name"] for p in listing["parameters"]} == {"limit", "offset"}
+    history = document["paths"]["/courts/{court_id}/calibrations"]["get"]
+    assert {p["name"] for p in history["parameters"]} == {"court_id", "limit", "offset"}
+    for paged in ("CourtList", "CalibrationList"):
+        assert "next_offset" in document["components"]["schemas"][paged]["properties"], paged
 
 
 def test_405_names_every_method_of_the_path(client: httpx.Client, auth: dict[str, str]) -> None:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import threading
-from datetime import timedelta
+from datetime import datetime, timedelta
 
 import pytest
 from sqlalchemy import select, text
@@ -14,14 +14,17 @@ from app.db.models import Calibration, Court, Job, JobAttempt, JobStage, JobStat
 from app.db.session import make_sessionmaker
 
 
-def add_jobs(engine, n: int, max_attempts: int = 3) -> tuple[str, list[str]]:
-    """One tenant, one court, `n` queued jobs created one after another; -> (court id, job ids)."""
+def add_jobs(
+    engine, n: int, max_attempts: int = 3, created_at: datetime | None = None
+) -> tuple[str, list[str]]:
+    """One tenant, one court, `n` queued jobs created one after another (1 ms apart from
+    `created_at`, default now); -> (court id, job ids)."""
     job_ids = []
     with make_sessionmaker(engine).begin() as session:
         key_row, _ = repo.create_api_key(session, name="t")
         court = repo.create_court(session, key_row.tenant_id, "c", "wsf")
         court_id = court.id
-        base = utcnow()
+        base = created_at or utcnow()
         for i in range(n):
             job = repo.new_job(
                 session,
@@ -121,6 +124,28 @@ def test_expired_lease_is_reclaimed_and_the_old_worker_is_fenced_off(engine) -> 
     queue.finish_success(engine, new, "new", make_calibration(new), {"total": 1.0})
     row = job_row(engine, job_id)
     assert (row.status, row.attempts, row.progress, row.worker_id) == ("succeeded", 2, 1.0, "new")
+
+
+def test_storing_the_same_calibration_again_does_nothing_more(engine) -> None:
+    """The worker retries finish_success when the connection drops; if the commit had gone
+    through, the retry finds the job succeeded with its calibration and stops there. Another
+    calibration for the finished job is still refused."""
+    _, [job_id] = add_jobs(engine, 1)
+    job = queue.claim(engine, "w", lease_s=60)
+    assert job is not None
+    calibration = make_calibration(job)
+    queue.finish_success(engine, job, "w", calibration, {"total": 1.0})
+    queue.finish_success(engine, job, "w", calibration, {"total": 2.0})
+    with pytest.raises(queue.LeaseLost):
+        queue.finish_success(engine, job, "w", make_calibration(job), {})
+    row = job_row(engine, job_id)
+    assert (row.status, row.calibration_id, row.timings) == (
+        "succeeded",
+        calibration.id,
+        {"total": 1.0},
+    )
+    with make_sessionmaker(engine)() as session:
+        assert session.scalars(select(Calibration.id)).all() == [calibration.id]
 
 
 def test_a_claim_that_waited_for_a_lock_still_gets_its_whole_lease(engine) -> None:
@@ -298,13 +323,69 @@ def test_a_tenant_with_nothing_running_goes_first(engine) -> None:
 
 def test_a_dead_workers_job_does_not_count_as_running(engine) -> None:
     _, a_ids = add_jobs(engine, 2)
-    _, [b_id] = add_jobs(engine, 1)
+    _, b_ids = add_jobs(engine, 2)
     now = utcnow()
-    assert queue.claim(engine, "dead", lease_s=10, now=now).id == a_ids[0]  # type: ignore[union-attr]
-    # its lease ran out: A has nothing running, like B, and A's job is the oldest claimable
-    later = now + timedelta(seconds=11)
-    assert queue.claim(engine, "w", lease_s=10, now=later).id == a_ids[0]  # type: ignore[union-attr]
-    assert queue.claim(engine, "w", lease_s=10, now=later).id == b_id  # type: ignore[union-attr]
+    assert queue.claim(engine, "live", lease_s=60, now=now).id == a_ids[0]  # type: ignore[union-attr]
+    later = now + timedelta(seconds=1)
+    assert queue.claim(engine, "dead", lease_s=10, now=later).id == b_ids[0]  # type: ignore[union-attr]
+    # B's lease ran out: B has nothing running and A one job, so B's job is taken again, although
+    # A's turn is the older one (were the dead job counted, A's next job would go first)
+    later += timedelta(seconds=11)
+    assert queue.claim(engine, "w", lease_s=60, now=later).id == b_ids[0]  # type: ignore[union-attr]
+
+
+def test_one_worker_finishing_each_job_still_takes_turns_across_tenants(engine) -> None:
+    """One worker (the default): when it claims, every tenant has nothing running. Tenant A
+    queued three jobs, then B one: B's is the second job taken, not the fourth."""
+    start = utcnow() - timedelta(minutes=1)
+    _, a_ids = add_jobs(engine, 3, created_at=start)
+    _, [b_id] = add_jobs(engine, 1, created_at=start + timedelta(seconds=1))
+    taken = []
+    while (job := queue.claim(engine, "only", lease_s=60)) is not None:
+        taken.append(job.id)
+        queue.finish_success(engine, job, "only", make_calibration(job), {})
+    assert taken == [a_ids[0], b_id, a_ids[1], a_ids[2]]
+
+
+def test_a_tenant_never_served_goes_before_one_served_before(engine) -> None:
+    """A's job came first and was done; A's next and C's job wait together: C, never served,
+    goes first although A's job is older."""
+    start = utcnow() - timedelta(minutes=1)
+    _, [a_first, a_next] = add_jobs(engine, 2, created_at=start)
+    _, [c_id] = add_jobs(engine, 1, created_at=start + timedelta(seconds=1))
+    job = queue.claim(engine, "w", lease_s=60)
+    assert job is not None and job.id == a_first
+    queue.finish_success(engine, job, "w", make_calibration(job), {})
+    assert [queue.claim(engine, "w", lease_s=60).id for _ in range(2)] == [c_id, a_next]  # type: ignore[union-attr]
+
+
+def test_workers_claiming_and_finishing_at_once_across_tenants_take_each_job_once(engine) -> None:
+    """Claims of one tenant queue on its row for its turn (PostgreSQL): no deadlock, no job taken
+    twice, every job done."""
+    job_ids = [job_id for _ in range(3) for job_id in add_jobs(engine, 6)[1]]
+    taken: list[str] = []
+    errors: list[BaseException] = []
+    lock = threading.Lock()
+
+    def worker(name: str) -> None:
+        try:
+            while (job := queue.claim(engine, name, lease_s=60)) is not None:
+                with lock:
+                    taken.append(job.id)
+                queue.finish_success(engine, job, name, make_calibration(job), {})
+        except BaseException as exc:  # surfaced below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=worker, args=(f"w{i}",)) for i in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert errors == []
+    assert sorted(taken) == sorted(job_ids)
+    with make_sessionmaker(engine)() as session:
+        statuses = session.scalars(select(Job.status)).all()
+    assert statuses == [JobStatus.SUCCEEDED] * len(job_ids)
 
 
 def test_jobs_of_one_court_finishing_together_do_not_deadlock(engine) -> None:

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
+import pytest
 import sqlalchemy as sa
 
 from app.db import queue
@@ -19,11 +21,11 @@ from tests.service.test_api import assert_error, make_court
 from tests.service.test_uploads import jobs_in_db, stored_job_dirs, upload
 
 
-def test_a_full_queue_is_429_with_retry_after_for_that_tenant_only(tmp_path: Path) -> None:
-    settings = make_settings(
-        tmp_path / "data", max_queued_jobs_per_tenant=2, queue_full_retry_after_s=17
-    )
-    upgrade_head(settings)
+@pytest.mark.both_databases
+def test_a_full_queue_is_429_with_retry_after_for_that_tenant_only(
+    new_settings: Callable[..., Settings],
+) -> None:
+    settings = new_settings(max_queued_jobs_per_tenant=2, queue_full_retry_after_s=17)
     busy = {"Authorization": f"Bearer {new_key(settings, 'busy')}"}
     other = {"Authorization": f"Bearer {new_key(settings, 'other')}"}
     image = files(png_bytes(seed=1))

@@ -1,5 +1,5 @@
 """How the worker records a failed job: the exception table, retry backoff, and a database that
-is away while the failure is recorded."""
+is away while the failure (or a success) is recorded, on SQLite and PostgreSQL."""
 
 from __future__ import annotations
 
@@ -10,19 +10,30 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
+import cv2
 import pytest
+from sqlalchemy import event, select
 from sqlalchemy.exc import OperationalError
+from sqlalchemy.orm import Session
 
+from app.calib import scene, synthetic
 from app.calib.pipeline import CourtNotFound
-from app.db import queue
-from app.db.migrate import upgrade_head
-from app.db.models import JobStatus, utcnow
-from app.db.session import make_engine
-from app.media import MediaError
+from app.db import queue, repo
+from app.db.models import (
+    AttemptOutcome,
+    Calibration,
+    Court,
+    JobAttempt,
+    JobStatus,
+    new_id,
+    utcnow,
+)
+from app.db.session import make_engine, make_sessionmaker
+from app.media import MediaError, media_store
 from app.settings import Settings
-from tests.service.conftest import make_settings
 from tests.service.test_queue import add_jobs, job_row
 from worker import main as worker_main
 from worker.errors import classify
@@ -63,17 +74,10 @@ def test_a_value_error_is_ours_not_invalid_input() -> None:
 
 
 @pytest.fixture
-def settings(tmp_path: Path) -> Settings:
-    # a short lease: recording a failure is given up after one lease
-    s = make_settings(
-        tmp_path / "data",
-        lease_s=1.0,
-        heartbeat_s=0.3,
-        progress_interval_s=0.1,
-        retry_backoff_s=30.0,
-    )
-    upgrade_head(s)
-    return s
+def settings(new_settings: Callable[..., Settings]) -> Settings:
+    # a short lease: recording a failure or a success is given up after one lease. On SQLite, or
+    # also on PostgreSQL for the tests marked both_databases
+    return new_settings(lease_s=1.0, heartbeat_s=0.3, progress_interval_s=0.1, retry_backoff_s=30.0)
 
 
 def run_failing_job(settings: Settings, exc: Exception, monkeypatch) -> tuple[str, str]:
@@ -94,6 +98,7 @@ def run_failing_job(settings: Settings, exc: Exception, monkeypatch) -> tuple[st
         engine.dispose()
 
 
+@pytest.mark.both_databases
 def test_a_bug_is_logged_with_its_traceback_and_retried_after_a_backoff(
     settings: Settings, monkeypatch, caplog
 ) -> None:
@@ -114,6 +119,7 @@ def test_a_bug_is_logged_with_its_traceback_and_retried_after_a_backoff(
         engine.dispose()
 
 
+@pytest.mark.both_databases
 def test_a_failure_is_recorded_once_the_database_is_back(
     settings: Settings, monkeypatch, caplog
 ) -> None:
@@ -137,6 +143,7 @@ def test_a_failure_is_recorded_once_the_database_is_back(
         engine.dispose()
 
 
+@pytest.mark.both_databases
 def test_a_database_away_for_good_does_not_kill_the_worker(settings: Settings, monkeypatch) -> None:
     def finish_failure_down(*args, **kwargs):
         raise db_down()
@@ -148,6 +155,86 @@ def test_a_database_away_for_good_does_not_kill_the_worker(settings: Settings, m
     engine = make_engine(settings)
     try:
         assert job_row(engine, job_id).status == JobStatus.RUNNING
+    finally:
+        engine.dispose()
+
+
+def queue_a_job_of_court_images(settings: Settings) -> str:
+    """A queued job whose upload is three rendered frames of a court, as the API stores one."""
+    size = (640, 360)
+    frames = scene.render_clip_frames(synthetic.typical_target_camera(size), size, 3, 3)
+    job_id = new_id()
+    folder = media_store(settings).create_job_dir(job_id)
+    names = [f"{i:03d}.png" for i in range(len(frames))]
+    for name, frame in zip(names, frames, strict=True):
+        assert cv2.imwrite(str(folder / name), frame)
+    engine = make_engine(settings)
+    try:
+        with make_sessionmaker(engine).begin() as session:
+            key_row, _ = repo.create_api_key(session, name="t")
+            court = repo.create_court(session, key_row.tenant_id, "c", "wsf")
+            repo.new_job(
+                session,
+                job_id=job_id,
+                tenant_id=key_row.tenant_id,
+                court_id=court.id,
+                media_kind="images",
+                media_files=names,
+                params={"seed": 0},
+                max_attempts=3,
+            )
+    finally:
+        engine.dispose()
+    return job_id
+
+
+@pytest.mark.both_databases
+def test_a_success_is_stored_once_the_database_is_back(settings: Settings, caplog) -> None:
+    """The connection drops while the finished calibration is stored: first its INSERT fails,
+    then the COMMIT goes through but its answer is lost. The worker tries again; the job ends
+    succeeded on its first attempt, with its calibration and the calibration's images."""
+    job_id = queue_a_job_of_court_images(settings)
+    engine = make_engine(settings)
+    inserts: list[str] = []
+    answer_lost = []
+
+    def drop_the_first_insert(conn, cursor, statement, parameters, context, executemany) -> None:
+        if statement.startswith("INSERT INTO calibrations"):
+            inserts.append(statement)
+            if len(inserts) == 1:
+                raise db_down()
+
+    def lose_the_answer_of_the_next_commit(session: Session) -> None:
+        if len(inserts) == 2 and not answer_lost:
+            answer_lost.append(True)
+            raise db_down()
+
+    event.listen(engine, "before_cursor_execute", drop_the_first_insert)
+    event.listen(Session, "after_commit", lose_the_answer_of_the_next_commit)
+    try:
+        job = queue.claim(engine, "w", settings.lease_s)
+        assert job is not None and job.id == job_id
+        status = worker_main.process_job(
+            engine, settings, job, "w", worker_main.Shutdown(threading.Event())
+        )
+    finally:
+        event.remove(Session, "after_commit", lose_the_answer_of_the_next_commit)
+        event.remove(engine, "before_cursor_execute", drop_the_first_insert)
+    try:
+        assert status == JobStatus.SUCCEEDED
+        assert len(inserts) == 2 and answer_lost == [True]
+        assert "storing the calibration of job" in caplog.text and "retrying" in caplog.text
+        row = job_row(engine, job_id)
+        assert (row.status, row.attempts, row.error_code) == (JobStatus.SUCCEEDED, 1, None)
+        with make_sessionmaker(engine)() as session:
+            calibration = session.get(Calibration, row.calibration_id)
+            assert calibration is not None and calibration.job_id == job_id
+            court = session.get(Court, calibration.court_id)
+            assert court is not None and court.active_calibration_id == calibration.id
+            outcomes = session.scalars(select(JobAttempt.outcome)).all()
+        assert outcomes == [AttemptOutcome.SUCCEEDED]
+        images = media_store(settings).calibration_dir(calibration.id)
+        assert {"background.png", "overlay.png", "edges.png"} <= {p.name for p in images.iterdir()}
     finally:
         engine.dispose()
 
