@@ -45,6 +45,10 @@ class Settings(BaseSettings):
 
     # Background: frames sampled from a clip, spread over its whole length
     background_frames: int = Field(default=15, ge=1, le=200)
+    # ... and the most memory (MB, 10^6 bytes) the full frames a clip job keeps may take: up to
+    # 3 x background_frames of them (the view on screen and the longest other view). Large frames
+    # get fewer (never below 3): 1080p and below all 15, 4K UHD 13, 4096 x 4096 6.
+    max_clip_frames_mb: int = Field(default=1024, ge=1)
 
     # Queue and worker. A short lease renewed often: a dead worker's job is visibly stale (and
     # claimable again) within seconds, while a few missed renewals (a slow database) are tolerated.

@@ -11,8 +11,11 @@ Synthetic clips (court render with two players, fresh sensor noise per frame, MP
   the main camera again until 5/6, a 1 s zoom to 1.12x and the zoomed view to the end. The main
   camera (two time ranges) must make the background.
 Each clip is measured in a fresh process, so the peak RSS is that of the clip's processing alone
-(after imports, shown apart). Columns: decode (grab every frame, retrieve the samples),
-segmentation (signatures, view shifts, keeping frames), background (`background_from_frames`),
+(after imports, shown apart). `background_from_clip` runs as the worker runs it, with the memory
+budget of the default settings (`max_clip_frames_mb`, 1024 MB: it lowers the frames only above
+1440p, e.g. 13 for 4K UHD; "frames used" says when it did). Columns: decode (grab every frame,
+retrieve the samples), segmentation (signatures, view shifts, keeping frames), background
+(`background_from_bands` over the kept frames, a band of rows at a time),
 wall total, CPU time of all the process's threads (the decoder runs two; on a shared machine the
 wall times grow with the load, the CPU time much less), and how far the background is from the empty-court render (mean absolute difference,
 grey levels; the codec alone accounts for ~3). "seek 15" is what the worker did before: 15 frames
@@ -127,6 +130,7 @@ def _write_clips(size: tuple[int, int], seconds: float, directory: Path) -> list
 def _measure(path: str, n_frames: int, old: bool, background_out: str) -> dict:
     """Run in a child process: one clip to background; timings, peak RSS and the shots."""
     from app.calib.background import background_from_clip, background_from_frames
+    from app.settings import Settings
 
     rss_after_imports = _peak_rss_mb()
     start = time.perf_counter()
@@ -138,7 +142,10 @@ def _measure(path: str, n_frames: int, old: bool, background_out: str) -> dict:
         info = {"timings_s": {"decode": decoded - start, "segmentation": 0.0}}
         info["timings_s"]["background"] = time.perf_counter() - decoded
     else:
-        background, moving, info = background_from_clip(path, n_frames=n_frames)
+        budget = Settings().max_clip_frames_mb * 1_000_000  # as worker.main.clip_background
+        background, moving, info = background_from_clip(
+            path, n_frames=n_frames, max_frames_bytes=budget
+        )
     total = time.perf_counter() - start
     cpu = time.process_time() - cpu_start
     cv2.imwrite(background_out, background)
@@ -273,7 +280,9 @@ def _rows(
         new_info = new_info or info
         timings = info["timings_s"]
         ranges = " ".join(f"{a}-{b}" for a, b in info.get("frame_ranges", []))
-        used = f"{n_frames} seeks" if old else ranges
+        used = f"{n_frames} seeks" if old else f"{ranges} ({info['frames_used']} frames)"
+        if info.get("frames_limited_by_memory"):
+            used += ", memory-limited"
         mad = "-" if truth is None else f"{_mean_abs_difference(background, truth):.2f}"
         rows.append(
             [

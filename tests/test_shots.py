@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import tracemalloc
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TypeVar
 
 import cv2
 import numpy as np
@@ -10,10 +13,12 @@ import pytest
 
 from app.calib import shots
 from app.calib.background import (
+    METHODS,
     ClipError,
     SpreadSample,
     background_from_clip,
     background_from_frames,
+    clip_frames_within,
     video_samples,
 )
 from tests import clips
@@ -21,6 +26,7 @@ from tests import clips
 SIZE = (480, 270)  # every frame is a sample at this size (see background.sample_interval_s)
 FPS = 25.0
 SEED = 5
+T = TypeVar("T")
 
 
 def _decoded(path: Path) -> list[np.ndarray]:
@@ -235,6 +241,127 @@ def test_samples_from_an_iterator(main_view, close_up) -> None:
     assert info["samples"] == 50
     assert _differs(background, truth)[0] < 1.0
     assert (moving > 0).mean() < 0.03
+
+
+# ---------------------------------------------------------------------------------------------
+# memory of a clip
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_a_clips_background_is_that_of_the_frames_it_used(main_view, close_up, method) -> None:
+    """The clip's background is made band by band from its kept frames: the same arrays as
+    background_from_frames on those frames; and the default budget changes nothing at this size."""
+    frames, _ = main_view
+    clip = frames[:30] + close_up + frames[30:]
+    samples = [(i, i / FPS, frame) for i, frame in enumerate(clip)]
+    background, moving, info = background_from_clip(samples, n_frames=9, method=method)
+    assert info["frames_used"] == 9 and not info["frames_limited_by_memory"]
+    used = [clip[i] for i in info["frame_indices_used"]]
+    want_background, want_moving = background_from_frames(used, method=method)
+    assert want_moving.any()  # a player lingered somewhere: the masks are compared too
+    np.testing.assert_array_equal(background, want_background)
+    np.testing.assert_array_equal(moving, want_moving)
+    budgeted = background_from_clip(
+        samples, n_frames=9, method=method, max_frames_bytes=1024 * 10**6
+    )
+    assert budgeted[2]["frame_indices_used"] == info["frame_indices_used"]
+    np.testing.assert_array_equal(budgeted[0], background)
+    np.testing.assert_array_equal(budgeted[1], moving)
+
+
+def test_frames_within_a_memory_budget() -> None:
+    budget = 1024 * 10**6  # the worker's default (settings.max_clip_frames_mb)
+    for width, height, frames in [
+        (640, 360, 15),
+        (1920, 1080, 15),
+        (2560, 1440, 15),
+        (3840, 2160, 13),
+        (4096, 4096, 6),
+    ]:
+        assert clip_frames_within(15, width * height * 3, budget) == frames, (width, height)
+    assert clip_frames_within(15, 4096 * 4096 * 3, None) == 15
+    # never below 3 frames for a budget, nor above what was asked
+    assert clip_frames_within(15, 4096 * 4096 * 3, 1) == 3
+    assert clip_frames_within(2, 4096 * 4096 * 3, 1) == 2
+
+
+def test_a_small_budget_uses_fewer_frames(main_view) -> None:
+    frames, _ = main_view
+    samples = [(i, i / FPS, frame) for i, frame in enumerate(frames)]
+    frame_bytes = frames[0].nbytes
+    _, _, info = background_from_clip(samples, max_frames_bytes=3 * 5 * frame_bytes)
+    assert info["frames_used"] == 5 and info["frames_limited_by_memory"]
+    # a view with fewer samples than the budget allows was not limited by it
+    _, _, short = background_from_clip(samples[:4], max_frames_bytes=3 * 5 * frame_bytes)
+    assert short["frames_used"] == 4 and not short["frames_limited_by_memory"]
+
+
+def _court_views(width: int, height: int) -> list[np.ndarray]:
+    """Two views of a grey "court" of random light lines: large frames that are cheap to make."""
+    rng = np.random.default_rng(SEED)
+    courts = []
+    for _ in range(2):
+        court = np.full((height, width, 3), 90, np.uint8)
+        for _ in range(16):
+            (x0, y0), (x1, y1) = rng.integers(0, (width, height), size=(2, 2))
+            cv2.line(court, (int(x0), int(y0)), (int(x1), int(y1)), (235, 235, 235), width // 250)
+        courts.append(court)
+    return courts
+
+
+def _large_clip(courts: list[np.ndarray], views: list[tuple[int, int]]) -> Iterator:
+    """Samples made on the fly (each its own array, as a decoder gives them): per (view,
+    n_samples), that view's court with a dark square (a player) crossing it."""
+    height, width = courts[0].shape[:2]
+    side = width // 10
+    index = 0
+    for view, n in views:
+        for _ in range(n):
+            frame = courts[view].copy()
+            x = (index * side // 4) % (width - side)
+            frame[height // 2 : height // 2 + side, x : x + side] = (40, 30, 150)
+            yield index, index / FPS, frame
+            del frame  # as video_samples: gone unless the consumer keeps it
+            index += 1
+
+
+def _traced_peak(run: Callable[[], T]) -> tuple[T, int]:
+    """run()'s result and the peak of the memory traced while it ran (numpy's arrays included)."""
+    tracemalloc.start()
+    try:
+        result = run()
+        return result, tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_a_memory_budget_bounds_a_clip_of_large_frames() -> None:
+    """2000x2000 frames (12 MB each) of one view, a cut to another and back (both views' samples
+    are kept at their fullest: 2 x 5 of the view on screen, 5 of the other) with a 200 MB budget:
+    5 frames, at most 15 kept (180 MB). The peak of all Python and numpy allocations (tracemalloc;
+    the source makes each frame as it is read) holds those 15 frames and stays within the budget
+    plus one frame (the sample's grey signature and the band work are far smaller). Without a
+    budget: 15 frames, and up to 42 kept at once (~500 MB)."""
+    width = height = 2000
+    frame_bytes = width * height * 3
+    budget = 200 * 10**6
+    views = [(0, 24), (1, 20), (0, 12)]
+    courts = _court_views(width, height)
+
+    (background, moving, info), peak = _traced_peak(
+        lambda: background_from_clip(_large_clip(courts, views), max_frames_bytes=budget)
+    )
+    assert info["shots"] == 3 and info["frame_ranges"] == [[0, 23], [44, 55]]
+    assert info["frames_used"] == 5 and info["frames_limited_by_memory"]
+    assert background.shape == (height, width, 3) and moving.shape == (height, width)
+    assert 15 * frame_bytes <= peak <= budget + frame_bytes, peak / 1e6
+
+    (_, _, unbounded_info), unbounded_peak = _traced_peak(
+        lambda: background_from_clip(_large_clip(courts, views))
+    )
+    assert unbounded_info["frames_used"] == 15
+    assert not unbounded_info["frames_limited_by_memory"]
+    assert unbounded_peak > 2.5 * peak, (unbounded_peak / 1e6, peak / 1e6)
 
 
 # ---------------------------------------------------------------------------------------------

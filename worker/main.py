@@ -308,9 +308,12 @@ def clip_background(
     path: Path, settings: Settings
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """A clip's background stage as a job runs it (`background_from_clip` with the service's
-    settings); raises ClipError."""
+    settings: its frames, duration and memory budget); raises ClipError."""
     return background_from_clip(
-        path, n_frames=settings.background_frames, max_duration_s=settings.max_video_duration_s
+        path,
+        n_frames=settings.background_frames,
+        max_duration_s=settings.max_video_duration_s,
+        max_frames_bytes=settings.max_clip_frames_mb * 1_000_000,
     )
 
 

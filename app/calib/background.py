@@ -30,6 +30,13 @@ view (`n_frames` of them), so memory stays bounded whatever the clip's length or
 The background is made from the longest view's frames alone (a view that returns after a replay
 counts with all its shots), so its moving mask is that view's too. The returned info says which
 time ranges were used.
+
+Memory of a clip: the kept frames are at most 3 x the frames the background uses (2 x for the view
+on screen, 1 x for the longest other one), plus the frame being sampled. With a byte budget
+(`max_frames_bytes`, the worker's `max_clip_frames_mb`) the number of frames is lowered for large
+frames so that those 3 x fit in it (never below `MIN_CLIP_FRAMES`), and the background is made
+from the kept frames a band of rows at a time (`background_from_bands`, identical to
+`background_from_frames`), so the median and mean steps never copy whole frames.
 """
 
 from __future__ import annotations
@@ -179,10 +186,18 @@ def background_from_frames(
     One frame: that frame and an empty mask.
     """
     stack = _check_frames(frames)
-    if method not in METHODS:
-        raise ValueError(f"unknown background method {method!r}; known: {', '.join(METHODS)}")
+    _check_method(method)
     if len(stack) == 1:
         return stack[0].copy(), np.zeros(stack[0].shape[:2], np.uint8)
+    return _background_and_mask(stack, method)
+
+
+def _check_method(method: str) -> None:
+    if method not in METHODS:
+        raise ValueError(f"unknown background method {method!r}; known: {', '.join(METHODS)}")
+
+
+def _background_and_mask(stack: list[np.ndarray], method: str) -> tuple[np.ndarray, np.ndarray]:
     if method == "median":
         background = temporal_median(stack)
     elif method == "frame_difference_mean":
@@ -203,18 +218,22 @@ def background_from_bands(
     width: int,
     read_rows: Callable[[int, int], np.ndarray],
     band_rows: int = BAND_ROWS,
+    method: str = "median_inlier_mean",
 ) -> tuple[np.ndarray, np.ndarray]:
-    """`background_from_frames` (its default method) computed one band of rows at a time, so
-    that no more than a band of every frame is in memory (the frames stay wherever `read_rows`
-    reads them from: `app.media.frames.FrameSpool` keeps them in a temporary file).
+    """`background_from_frames` computed one band of rows at a time, so that no more than a
+    band of every frame is in memory besides the frames themselves, wherever `read_rows` reads
+    them from (`app.media.frames.FrameSpool` keeps them in a temporary file, `background_from_clip`
+    in memory).
 
     `read_rows(top, bottom)` -> uint8 (n_frames, bottom - top, width, 3): those rows of every
-    frame. The result is identical to `background_from_frames` on the whole frames: every step is
-    per pixel except the two mask dilations (radius r each), so a band read with 2 r extra rows
-    on both sides is exact on the band itself.
+    frame. The result is identical to `background_from_frames` on the whole frames, with any of
+    its methods: every step is per pixel except two mask dilations (radius r each: the motion
+    masks, then the untrusted mask), so a band read with 2 r extra rows on both sides is exact
+    on the band itself.
     """
     if n_frames < 1 or height < 1 or width < 1:
         raise ValueError(f"need frames of a positive size, got {n_frames} of {width}x{height}")
+    _check_method(method)
     if n_frames == 1:
         return np.ascontiguousarray(read_rows(0, height)[0]), np.zeros((height, width), np.uint8)
     halo = 2 * max(1, round(DILATE_FRACTION * width))
@@ -226,9 +245,7 @@ def background_from_bands(
         band = read_rows(first, last)
         if band.shape != (n_frames, last - first, width, 3) or band.dtype != np.uint8:
             raise ValueError(f"read_rows({first}, {last}) gave {band.dtype} {band.shape}")
-        stack = list(band)
-        band_background = median_inlier_mean(stack)
-        band_mask = untrusted_mask(stack, band_background)
+        band_background, band_mask = _background_and_mask(list(band), method)
         background[top:bottom] = band_background[top - first : bottom - first]
         moving_mask[top:bottom] = band_mask[top - first : bottom - first]
     return background, moving_mask
@@ -252,6 +269,12 @@ TIMESTAMP_SLACK_S = 1e-3
 # Without a view on screen this long (unless the whole clip is one view) there is no background: a
 # shorter stretch is a transition or a glimpse, with too little player movement to remove them.
 MIN_STATIC_VIEW_S = 1.0
+# A clip keeps at most this many full frames per frame of its background: 2 for the view on screen
+# (its SpreadSample), 1 for the longest other view.
+KEPT_FRAMES_PER_FRAME_USED = 3
+# A memory budget never lowers a clip's background below this many frames (a median needs a
+# majority of frames without the player; 3 is the fewest that has one).
+MIN_CLIP_FRAMES = 3
 
 
 class ClipError(ValueError):
@@ -312,10 +335,24 @@ def video_samples(
                 if ok and frame is not None and frame.size > 0:
                     yield index, time_s, frame
                     next_sample_s = time_s + interval_s
+                # not kept beside the next frame (the caller may have dropped it)
+                del frame
             previous_s = time_s
             index += 1
     finally:
         capture.release()
+
+
+def clip_frames_within(n_frames: int, frame_bytes: int, max_frames_bytes: int | None) -> int:
+    """Frames for a clip's background: `n_frames`, fewer when the frames kept for them
+    (KEPT_FRAMES_PER_FRAME_USED x, of `frame_bytes` each) would take more than
+    `max_frames_bytes` (None: no limit), but at least MIN_CLIP_FRAMES (or `n_frames` if fewer)."""
+    if n_frames < 1 or frame_bytes < 1:
+        raise ValueError(f"need n_frames >= 1 and frame_bytes >= 1, got {n_frames}, {frame_bytes}")
+    if max_frames_bytes is None:
+        return n_frames
+    fit = max_frames_bytes // (KEPT_FRAMES_PER_FRAME_USED * frame_bytes)
+    return min(n_frames, max(MIN_CLIP_FRAMES, fit))
 
 
 class SpreadSample:
@@ -356,21 +393,31 @@ def background_from_clip(
     max_duration_s: float | None = None,
     min_static_view_s: float = MIN_STATIC_VIEW_S,
     method: str = "median_inlier_mean",
+    max_frames_bytes: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """(background, moving_mask, info) of the longest static view of a clip.
 
     source: a video file, or samples (frame index, timestamp s, BGR uint8 frame) in time order
     (e.g. from `video_samples`; spaced as the caller likes; frames are kept as given, so each must
     be its own array, not a buffer the caller reuses). Up to `n_frames` frames of the chosen
-    view, spread over its shots, make the background (`background_from_frames`).
+    view, spread over its shots, make the background (`background_from_bands` over them: the
+    same as `background_from_frames`). max_frames_bytes: the most memory the kept frames may
+    take (None: no limit); from the first sample's size, the frames are lowered to
+    `clip_frames_within(n_frames, frame bytes, max_frames_bytes)` so that the 3 x as many kept
+    fit in it.
     info: the shots found and what was used; times in seconds, frame indices from 0, ranges
     inclusive of their last frame: {"samples", "shots", "views", "cuts_s", "camera_moves_s",
     "view_duration_s", "time_ranges_s": [[start, end], ...], "frame_ranges": [[first, last], ...],
-    "frames_used", "frame_indices_used", "timings_s": {"decode", "segmentation", "background"}}.
+    "frames_used", "frame_indices_used", "frames_limited_by_memory" (the budget allowed fewer
+    than `n_frames` frames and the view had more samples than it allowed),
+    "timings_s": {"decode", "segmentation", "background"}}.
     Raises ClipError when the clip has no frame or no view lasting `min_static_view_s`.
     """
     if n_frames < 1:
         raise ValueError(f"n_frames must be >= 1, got {n_frames}")
+    if max_frames_bytes is not None and max_frames_bytes < 1:
+        raise ValueError(f"max_frames_bytes must be >= 1 or None, got {max_frames_bytes}")
+    _check_method(method)
     if isinstance(source, str | os.PathLike):
         samples: Iterator[ClipSample] = video_samples(source, max_duration_s=max_duration_s)
     else:
@@ -380,6 +427,7 @@ def background_from_clip(
     kept: dict[int, SpreadSample] = {}
     first: tuple[int, float] | None = None
     last = (0, 0.0)
+    n_keep = n_frames  # lowered by the memory budget once the frame size is known
     try:
         while True:
             start = time.perf_counter()
@@ -391,21 +439,26 @@ def background_from_clip(
             index, time_s, frame = sample
             if max_duration_s is not None and time_s > max_duration_s:
                 break
+            if first is None:
+                frame_bytes = max(1, np.asarray(frame).nbytes)
+                n_keep = clip_frames_within(n_frames, frame_bytes, max_frames_bytes)
             first = first or (index, time_s)
             last = (index, time_s)
             shot, new_shot = segmenter.add(index, time_s, view_signature(frame))
             if new_shot:
                 # full frames only for the view on screen and the longest other one, whose
-                # sample can shrink to what the background takes: <= 3 n_frames frames in all
+                # sample can shrink to what the background takes: <= 3 n_keep frames in all
                 durations = view_durations_s(segmenter.shots, _frame_interval_s(first, last))
                 others = [view for view in durations if view != shot.view]
                 longest_other = max(others, key=durations.__getitem__) if others else None
                 for view in list(kept):
                     if view == longest_other:
-                        kept[view].shrink(n_frames)
+                        kept[view].shrink(n_keep)
                     elif view != shot.view:
                         del kept[view]
-            kept.setdefault(shot.view, SpreadSample(2 * n_frames)).add((index, frame))
+            kept.setdefault(shot.view, SpreadSample(2 * n_keep)).add((index, frame))
+            # a frame not kept goes now, not once the next one has been decoded beside it
+            del sample, frame
             timings["segmentation"] += time.perf_counter() - start
     finally:
         close = getattr(samples, "close", None)
@@ -424,12 +477,21 @@ def background_from_clip(
             f"the clip has no static view of the court longer than {min_static_view_s:g} s "
             f"(the longest lasts {durations[view]:.2f} s; {len(shots)} shots)",
         )
-    picked = kept.pop(view).pick(n_frames)
+    picked = kept.pop(view).pick(n_keep)
     kept.clear()
     start = time.perf_counter()
-    background, moving_mask = background_from_frames([f for _, f in picked], method=method)
+    frames = _check_frames([f for _, f in picked])
+    height, width = frames[0].shape[:2]
+
+    def read_rows(top: int, bottom: int) -> np.ndarray:
+        return np.stack([f[top:bottom] for f in frames])
+
+    background, moving_mask = background_from_bands(
+        len(frames), height, width, read_rows, method=method
+    )
     timings["background"] = time.perf_counter() - start
     used = [s for s in shots if s.view == view]
+    view_samples = sum(s.n_samples for s in used)
     info: dict[str, Any] = {
         "samples": sum(s.n_samples for s in shots),
         "shots": len(shots),
@@ -443,6 +505,7 @@ def background_from_clip(
         "frame_ranges": [[s.first_frame, s.last_frame] for s in used],
         "frames_used": len(picked),
         "frame_indices_used": [i for i, _ in picked],
+        "frames_limited_by_memory": n_keep < n_frames and view_samples > n_keep,
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
     }
     return background, moving_mask, info

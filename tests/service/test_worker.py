@@ -24,7 +24,7 @@ from tests import clips
 from tests.service.conftest import api_client, new_key
 from tests.service.helpers import court_clip_bytes, files
 from tests.service.test_api import assert_error, make_court
-from worker.main import Shutdown, process_job
+from worker.main import Shutdown, clip_background, process_job
 
 SIZE = (960, 540)
 MID_COURT_M = np.array([[3.2, 5.44], [2.0, 4.5], [4.4, 6.5], [3.2, 7.5]])
@@ -237,6 +237,19 @@ def test_clip_with_a_cut_uses_the_main_view(worker_settings: Settings, tmp_path:
         ).json()
         error_cm = 100 * np.linalg.norm(np.array(body["points"]) - MID_COURT_M, axis=1)
         assert error_cm.max() < 5.0, error_cm
+
+
+def test_clip_background_keeps_frames_within_the_memory_setting(tmp_path: Path) -> None:
+    """The worker's clip stage takes its frame budget from max_clip_frames_mb: 960x540 frames
+    take 1.56 MB, so 19 MB hold 3 x 4 of them: 4 frames for the background instead of 7."""
+    frames = clips.render_clip_frames(clips.main_camera(SIZE), SIZE, 40, 33)
+    path = tmp_path / "static.mp4"
+    clips.write_video(frames, path)
+    _, _, info = clip_background(path, Settings(data_dir=tmp_path, background_frames=7))
+    assert info["frames_used"] == 7 and not info["frames_limited_by_memory"]
+    small = Settings(data_dir=tmp_path, background_frames=7, max_clip_frames_mb=19)
+    _, _, limited = clip_background(path, small)
+    assert limited["frames_used"] == 4 and limited["frames_limited_by_memory"]
 
 
 def test_clip_without_a_static_view_fails(worker_settings: Settings, tmp_path: Path) -> None:
