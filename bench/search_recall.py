@@ -1,6 +1,6 @@
 """Where the search loses the court: `python -m bench.search_recall [--per-class 12] [--first-seed 0]`.
 
-The global search (`pipeline.search_cameras`) narrows ~10^5 hypotheses down to a few candidates
+The global search (`search.search_cameras`) narrows ~10^5 hypotheses down to a few candidates
 in stages (hypotheses from the lines and the placement grid, a cheap floor pass, the coarse
 ranking, the cameras chosen for polishing, polished, candidates). For each seeded case of
 `bench.synthetic`'s classes, rendered with a known camera, this reports per stage the share of
@@ -12,7 +12,7 @@ picture's width (where the refinement reliably converges from), and whether the 
 Also per class: the lens estimate's error (the plumb-line division-model lambda against the one
 closest to the true camera's radial terms over the picture) and the search's median time.
 
-'picked' follows the candidates one step further, through `pipeline.refine_candidates` (each
+'picked' follows the candidates one step further, through `refine.refine_candidates` (each
 refined, the best-scoring one picked to start the final fit): the share of cases where the
 picked camera is near. A case near at 'candidates' but not at 'picked' is lost to the ranking of
 the refined cameras, not to the search (seeds 2000+: zoomed 2003 and 2004, where a camera
@@ -106,7 +106,7 @@ def expected_lambda(truth: np.ndarray, size: tuple[int, int]) -> float:
 
 
 def run_case(kind: str, seed: int) -> Recall:
-    from app.calib import cases, lines, pipeline, refine, search, segments
+    from app.calib import cases, lines, refine, search, segments, verify
     from app.calib.court import court_model
     from bench.synthetic import clip_background
 
@@ -124,9 +124,9 @@ def run_case(kind: str, seed: int) -> Recall:
     near_px = NEAR_SHARE_OF_WIDTH * size[0]
     out = Recall(kind, seed)
     t0 = time.perf_counter()
-    evidence = pipeline.line_evidence_of(image, moving)
+    evidence = lines.line_evidence_of(image, moving)
     maps = lines.evidence_maps(evidence)
-    verify = search.verify_samples(model)
+    verify = verify.verify_samples(model)
     errors_of: dict[str, np.ndarray] = {}
 
     def trace(stage: str, cameras: np.ndarray) -> None:
@@ -140,11 +140,11 @@ def run_case(kind: str, seed: int) -> Recall:
         trace(stage, cameras)
         traced_s += time.perf_counter() - t
 
-    found = pipeline.search_cameras(evidence, maps, model, size, None, verify, trace=timed_trace)
+    found = search.search_cameras(evidence, maps, model, size, None, verify, trace=timed_trace)
     out.seconds = time.perf_counter() - t0 - traced_s
     if len(found.candidates):
         samples = refine.fit_samples(model, refine.spacing_for_width(size[0]))
-        _, fit, _ = pipeline.refine_candidates(found.candidates, samples, maps, verify, model, size)
+        _, fit, _ = refine.refine_candidates(found.candidates, samples, maps, verify, model, size)
         picked = floor_grid_errors_px(case.genome, fit.genome[None, :], case.spec, size)
         out.picked_near = bool(picked[0] <= near_px)
     for stage in STAGES:

@@ -6,16 +6,16 @@ pool beside other requests."""
 
 import pytest
 
-from app.calib import camera, lines, refine, search, segments
+from app.calib import camera, lines, placement, refine, search, segments, verify
 
 LONG_KERNELS = [
     search._hypotheses_njit,
     search._wall_hypotheses_njit,
     search._poses_njit,
-    search._coarse_njit,
-    search._verify_njit,
-    search._floor_share_njit,
-    search._in_play_volume_all,
+    verify._coarse_njit,
+    verify._verify_njit,
+    placement._floor_share_njit,
+    placement._in_play_volume_all,
     lines._best_ridge,
     lines._ridge_centres,
     lines._steps,

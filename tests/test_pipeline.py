@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from app.calib import camera, cases, pipeline, render, scene, search, synthetic
+from app.calib import camera, cases, pipeline, refine, render, scene, search, synthetic, verify
 from app.calib.court import court_model, floor_grid
 
 SIZE = (1280, 720)
@@ -270,10 +270,10 @@ def test_bad_input_raises_value_error(photo):
 
 def test_lens_fold_guard():
     genome = club_camera()
-    assert not pipeline.lens_folds_in_image(genome, SIZE)
+    assert not refine.lens_folds_in_image(genome, SIZE)
     assert np.isfinite(camera.lens_fold_radius(genome))  # folds, but outside the picture
     genome[camera.GENE["k1"]] = -0.6
-    assert pipeline.lens_folds_in_image(genome, SIZE)
+    assert refine.lens_folds_in_image(genome, SIZE)
     genome[camera.GENE["k1"]] = 0.1
     assert camera.lens_fold_radius(genome) == np.inf
 
@@ -282,7 +282,7 @@ def largest_k2_left_over_px(focal_px: float, image_size: tuple[int, int]) -> flo
     """The most plausible k2's largest displacement over the picture less what k1 and the focal
     length absorb (least squares over the radius)."""
     r = np.linspace(0.0, 0.5 * np.hypot(*image_size) / focal_px, 200)
-    displacement_px = pipeline.PLAUSIBLE_K2 * r**5 * focal_px
+    displacement_px = refine.PLAUSIBLE_K2 * r**5 * focal_px
     basis = np.column_stack([r, r**3]) * focal_px
     absorbed, *_ = np.linalg.lstsq(basis, displacement_px, rcond=None)
     return float(np.abs(displacement_px - basis @ absorbed).max())
@@ -297,7 +297,7 @@ def test_a_second_radial_term_is_tried_only_where_it_could_move_a_line_by_a_pixe
 ):
     genome = np.zeros(camera.N_GENES)
     genome[camera.GENE["f_u"]] = genome[camera.GENE["f_v"]] = focal_px
-    assert pipeline.second_radial_term_could_show(genome, image_size) is could_show
+    assert refine.second_radial_term_could_show(genome, image_size) is could_show
     assert (largest_k2_left_over_px(focal_px, image_size) > 1.0) is could_show
 
 
@@ -343,12 +343,12 @@ def test_a_strong_lens_the_least_squares_plumb_line_misjudged_is_straightened() 
 
     case = cases.make_case("wide_angle", 5008)
     size = (case.image.shape[1], case.image.shape[0])
-    evidence = pipeline.line_evidence_of(case.image)
+    evidence = lines.line_evidence_of(case.image)
     lens = segments.undistortion_candidates(segments.chains_of(evidence), size)[0]
     assert lens.lam < -0.25
     model = court_model(case.spec)
-    found = pipeline.search_cameras(
-        evidence, lines.evidence_maps(evidence), model, size, None, search.verify_samples(model)
+    found = search.search_cameras(
+        evidence, lines.evidence_maps(evidence), model, size, None, verify.verify_samples(model)
     )
     errors = floor_grid_errors_px(case.genome, found.candidates, case.spec, size)
     assert errors.min() <= NEAR_SHARE_OF_WIDTH * size[0]

@@ -4,7 +4,7 @@ them into good / check / not_a_court."""
 import numpy as np
 import pytest
 
-from app.calib import camera, lines, quality, scene, search
+from app.calib import camera, lines, placement, quality, scene, search, verify
 from app.calib.court import court_model
 
 SIZE = (1280, 720)
@@ -28,9 +28,9 @@ def maps() -> lines.EvidenceMaps:
 
 def _figures(genome: np.ndarray, maps: lines.EvidenceMaps) -> dict[str, float]:
     model = court_model()
-    figures = quality.quality_figures(genome, search.verify_samples(model), maps, model, SIZE[0])
+    figures = quality.quality_figures(genome, verify.verify_samples(model), maps, model, SIZE[0])
     figures["floor_error_t_cm"] = 1.0
-    figures["floor_share"] = float(search.floor_shares(genome, model, SIZE)[0])
+    figures["floor_share"] = float(placement.floor_shares(genome, model, SIZE)[0])
     return figures
 
 

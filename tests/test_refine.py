@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from app.calib import cases, lines, parallel, pipeline, refine, render, search
+from app.calib import cases, lines, parallel, pipeline, refine, render, verify
 from app.calib.court import court_model
 from bench.synthetic import FOUND_FLOOR_CM, FOUND_LINES_PX, camera_errors
 
@@ -15,9 +15,9 @@ def _fit_inputs(case: cases.SyntheticCase):
     """What the final fit of a rendered case works with: the picture's size, its evidence maps,
     the court's fit samples and the pipeline's truncations."""
     size = (case.image.shape[1], case.image.shape[0])
-    maps = lines.evidence_maps(pipeline.line_evidence_of(case.image))
+    maps = lines.evidence_maps(lines.line_evidence_of(case.image))
     samples = refine.fit_samples(court_model(case.spec), refine.spacing_for_width(size[0]))
-    return size, maps, samples, pipeline.refine_taus(size[0])
+    return size, maps, samples, refine.refine_taus(size[0])
 
 
 def _radial_fit_from_truth(case: cases.SyntheticCase):
@@ -48,9 +48,9 @@ def test_perturbed_starts_never_raise_the_cost_and_repeat_exactly(monkeypatch) -
     case = cases.make_case("club", 1000)
     width = case.image.shape[1]
     model = court_model(case.spec)
-    maps = lines.evidence_maps(pipeline.line_evidence_of(case.image))
+    maps = lines.evidence_maps(lines.line_evidence_of(case.image))
     samples = refine.fit_samples(model, refine.spacing_for_width(width))
-    taus = pipeline.refine_taus(width)
+    taus = refine.refine_taus(width)
     start = case.genome.copy()
     start[refine.GENE["t_x"]] += 0.06  # a few pixels off
     fit = refine.refine(start, samples, maps, taus[-1])
@@ -98,12 +98,12 @@ def test_model_selection_keeps_moving_the_terms_a_fit_already_has() -> None:
     being frozen where the earlier fit left it."""
     case = cases.make_case("wide_angle", 1002)
     width = case.image.shape[1]
-    maps = lines.evidence_maps(pipeline.line_evidence_of(case.image))
+    maps = lines.evidence_maps(lines.line_evidence_of(case.image))
     samples = refine.fit_samples(court_model(case.spec), refine.spacing_for_width(width))
     start = case.genome.copy()
     start[refine.GENE["c_u"]] += 8.0
     fit = refine.refine_coarse_to_fine(
-        start, samples, maps, pipeline.refine_taus(width)[1:], refine.model_with(("centre",))
+        start, samples, maps, refine.refine_taus(width)[1:], refine.model_with(("centre",))
     )
     selected = refine.select_model(fit, samples, maps, width)
     assert selected.model.extensions[0] == "centre"
@@ -117,12 +117,12 @@ def test_a_candidate_with_non_square_pixels_is_refitted_and_named_with_its_aspec
     case = cases.make_case("anamorphic_cropped", 1007)
     size = (case.image.shape[1], case.image.shape[0])
     model = court_model(case.spec)
-    maps = lines.evidence_maps(pipeline.line_evidence_of(case.image))
+    maps = lines.evidence_maps(lines.line_evidence_of(case.image))
     samples = refine.fit_samples(model, refine.spacing_for_width(size[0]))
     start = case.genome.copy()
     start[refine.GENE["f_v"]] *= 1.02
-    _, fit, _ = pipeline.refine_candidates(
-        start[None, :], samples, maps, search.verify_samples(model), model, size
+    _, fit, _ = refine.refine_candidates(
+        start[None, :], samples, maps, verify.verify_samples(model), model, size
     )
     assert "aspect" in fit.model.extensions
     true_aspect = case.genome[refine.GENE["f_v"]] / case.genome[refine.GENE["f_u"]]
@@ -205,11 +205,11 @@ def test_junctions_found_off_their_lines_are_given_offsets_instead_of_bending_th
     for line in render.court_polylines(case.genome, model.subset(list(names[junctions]))):
         shifted = np.round((line + [0.0, 1.5]) * 16).astype(np.int32).reshape(-1, 1, 2)
         cv2.polylines(image, [shifted], False, 255, thickness=1, lineType=cv2.LINE_8, shift=4)
-    maps = lines.evidence_maps(pipeline.line_evidence_of(image))
+    maps = lines.evidence_maps(lines.line_evidence_of(image))
     samples = refine.fit_samples(model, refine.spacing_for_width(size[0]))
-    taus = pipeline.refine_taus(size[0])
+    taus = refine.refine_taus(size[0])
     clean_maps = lines.evidence_maps(
-        pipeline.line_evidence_of(render.rasterize_court(case.genome, model, size))
+        lines.line_evidence_of(render.rasterize_court(case.genome, model, size))
     )
     clean = refine.refine_coarse_to_fine(case.genome, samples, clean_maps, taus[1:])
     clean_px = camera_errors(case.genome, clean.genome, case.spec, size)[1]

@@ -3,7 +3,18 @@
 import numpy as np
 import pytest
 
-from app.calib import camera, court, lines, parallel, scene, search, segments, synthetic
+from app.calib import (
+    camera,
+    court,
+    lines,
+    parallel,
+    placement,
+    scene,
+    search,
+    segments,
+    synthetic,
+    verify,
+)
 from app.calib.court import floor_grid
 
 SIZE = (960, 540)
@@ -224,8 +235,8 @@ def test_no_camera_stands_where_players_play():
         at(3.2, 6.0, 2.5),
         at(3.2, 4.0, 6.0),
     ]
-    assert search.in_play_volume(np.array(inside), model).all()
-    assert not search.in_play_volume(np.array(outside), model).any()
+    assert placement.in_play_volume(np.array(inside), model).all()
+    assert not placement.in_play_volume(np.array(outside), model).any()
 
 
 def test_a_cropped_photo_is_found_with_the_vertical():
@@ -319,35 +330,35 @@ def rendered() -> tuple[np.ndarray, np.ndarray, lines.EvidenceMaps]:
 def test_the_true_camera_outscores_moved_ones(rendered):
     truth, _, maps = rendered
     model = court.court_model()
-    samples = search.verify_samples(model)
+    samples = verify.verify_samples(model)
     moved = np.repeat(truth[None], 4, axis=0)
     moved[0, camera.GENE["t_x"]] += 0.15
     moved[1, camera.GENE["alpha"]] += 0.01
     moved[2, camera.GENE["f_u"] : camera.GENE["f_v"] + 1] *= 1.05
     moved[3, camera.GENE["t_z"]] += 1.0
     cameras = np.vstack([truth[None], moved])
-    tolerance = search.verify_tolerance_px(SIZE[0])
-    supported, visible, llr = search.edge_support(cameras, samples, maps, tolerance)
+    tolerance = verify.verify_tolerance_px(SIZE[0])
+    supported, visible, llr = verify.edge_support(cameras, samples, maps, tolerance)
     assert np.argmax(llr) == 0
     assert supported[0].sum() / visible[0].sum() > 0.7
-    coarse = search.coarse_scores(cameras, model, maps, (search.rank_tolerance_px(SIZE[0]),))[:, 0]
+    coarse = verify.coarse_scores(cameras, model, maps, (verify.rank_tolerance_px(SIZE[0]),))[:, 0]
     assert np.argmax(coarse) == 0
 
 
 def test_scores_split_over_threads_equal_the_serial_ones(rendered, monkeypatch):
     truth, _, maps = rendered
     model = court.court_model()
-    samples = search.verify_samples(model)
+    samples = verify.verify_samples(model)
     rng = np.random.default_rng(0)
     # enough cameras that every thread gets rows, and a count no thread count divides evenly
     cameras = np.repeat(truth[None], 4 * parallel.MIN_ROWS_PER_THREAD + 3, axis=0)
     cameras[:, camera.GENE["t_x"] : camera.GENE["t_z"] + 1] += rng.normal(0, 0.3, (len(cameras), 3))
-    tolerances = (search.rank_tolerance_px(SIZE[0]), search.verify_tolerance_px(SIZE[0]))
+    tolerances = (verify.rank_tolerance_px(SIZE[0]), verify.verify_tolerance_px(SIZE[0]))
 
     def scores() -> list[np.ndarray]:
         return [
-            *search.edge_support(cameras, samples, maps, tolerances[1]),
-            search.coarse_scores(cameras, model, maps, tolerances),
+            *verify.edge_support(cameras, samples, maps, tolerances[1]),
+            verify.coarse_scores(cameras, model, maps, tolerances),
         ]
 
     monkeypatch.setattr(parallel, "thread_count", lambda: 4)
@@ -363,8 +374,8 @@ def test_scores_split_over_threads_equal_the_serial_ones(rendered, monkeypatch):
 def test_one_image_line_is_evidence_for_one_court_line(rendered):
     """A camera laying two court lines on the same marks is not paid twice for them."""
     truth, _, maps = rendered
-    one = search.verify_samples(court.court_model().subset(["half_court"]))
-    twice = search.VerifySamples(
+    one = verify.verify_samples(court.court_model().subset(["half_court"]))
+    twice = verify.VerifySamples(
         points=np.vstack([one.points, one.points]),
         directions=np.vstack([one.directions, one.directions]),
         edge=np.concatenate([one.edge, one.edge + 1]),
@@ -373,9 +384,9 @@ def test_one_image_line_is_evidence_for_one_court_line(rendered):
         spacing_m=one.spacing_m,
         n_edges=2,
     )
-    tolerance = search.verify_tolerance_px(SIZE[0])
-    supported_one, visible_one, llr_one = search.edge_support(truth, one, maps, tolerance)
-    supported_twice, visible_twice, llr_twice = search.edge_support(truth, twice, maps, tolerance)
+    tolerance = verify.verify_tolerance_px(SIZE[0])
+    supported_one, visible_one, llr_one = verify.edge_support(truth, one, maps, tolerance)
+    supported_twice, visible_twice, llr_twice = verify.edge_support(truth, twice, maps, tolerance)
     assert llr_one[0] > 0
     # the second copy only adds the misses of its unsupported samples
     assert 0.9 * llr_one[0] < llr_twice[0] <= llr_one[0]
@@ -386,11 +397,11 @@ def test_one_image_line_is_evidence_for_one_court_line(rendered):
 
 def test_a_line_grazing_the_lens_does_not_win_on_a_few_samples(rendered):
     truth, _, maps = rendered
-    samples = search.verify_samples(court.court_model())
-    tolerance = search.verify_tolerance_px(SIZE[0])
-    _, visible, _ = search.edge_support(truth, samples, maps, tolerance)
+    samples = verify.verify_samples(court.court_model())
+    tolerance = verify.verify_tolerance_px(SIZE[0])
+    _, visible, _ = verify.edge_support(truth, samples, maps, tolerance)
     # no sample stands for more than a share of the diagonal: an edge's visible length is bounded
-    per_sample_cap = search.MAX_SAMPLE_SHARE_OF_DIAGONAL * np.hypot(*SIZE)
+    per_sample_cap = verify.MAX_SAMPLE_SHARE_OF_DIAGONAL * np.hypot(*SIZE)
     counts = np.bincount(samples.edge, minlength=samples.n_edges)
     assert np.all(visible[0] <= counts * per_sample_cap + 1e-6)
 
@@ -398,7 +409,7 @@ def test_a_line_grazing_the_lens_does_not_win_on_a_few_samples(rendered):
 def test_floor_share(rendered):
     truth, _, _ = rendered
     model = court.court_model()
-    share = search.floor_shares(truth, model, SIZE)[0]
+    share = placement.floor_shares(truth, model, SIZE)[0]
     # the floor polygon drawn and counted
     floor = np.zeros(SIZE[::-1], np.uint8)
     corners = camera.floor_to_pixel(truth, np.array([[0, 0], [6.4, 0], [6.4, 9.75], [0, 9.75]]))
@@ -408,7 +419,7 @@ def test_floor_share(rendered):
     assert share == pytest.approx(floor.mean(), abs=0.03)
     looking_up = truth.copy()
     looking_up[camera.GENE["alpha"]] -= 0.6
-    assert search.floor_shares(looking_up, model, SIZE)[0] < share / 3
+    assert placement.floor_shares(looking_up, model, SIZE)[0] < share / 3
 
 
 def test_distinct_best_keeps_cameras_apart(rendered):
@@ -417,7 +428,7 @@ def test_distinct_best_keeps_cameras_apart(rendered):
     near = np.repeat(truth[None], 3, axis=0)
     near[1, camera.GENE["t_x"]] += 0.001
     near[2, camera.GENE["t_x"]] += 1.0
-    chosen = search.distinct_best(near, np.array([3.0, 2.0, 1.0]), model, SIZE, 3)
+    chosen = verify.distinct_best(near, np.array([3.0, 2.0, 1.0]), model, SIZE, 3)
     assert list(chosen) == [0, 2]
 
 
@@ -502,5 +513,5 @@ def test_a_camera_behind_the_front_wall_is_implausible(centre, behind):
     genome = search.look_at_genomes(
         np.array([centre]), np.array([[3.2, 5.0, 0.0]]), np.zeros(1), np.array([800.0]), SIZE
     )
-    assert search.behind_front_wall(genome, court.court_model())[0] == behind
-    assert search.implausible_placement(genome, court.court_model())[0] == behind
+    assert placement.behind_front_wall(genome, court.court_model())[0] == behind
+    assert placement.implausible_placement(genome, court.court_model())[0] == behind

@@ -34,6 +34,8 @@ import cv2
 import numba
 import numpy as np
 
+from app.calib import edges
+
 # Gaussian scales (px) of the ridge detector. A band of width w answers best near sigma = w / 2;
 # painted lines are 50 mm, 1-3 px far away at 640 px wide, up to ~12 px near a 1080p camera.
 RIDGE_SIGMAS_PX = (1.0, 1.8, 3.2, 5.6)
@@ -553,3 +555,43 @@ def edge_image_evidence(
         ignore=np.zeros((h, w), bool) if ignore is None else np.asarray(ignore, dtype=bool),
         noise=0.0,
     )
+
+
+def image_size_of(image: np.ndarray) -> tuple[int, int]:
+    """(width, height) of a grey (H, W) or colour (H, W, C) image."""
+    shape = np.shape(image)
+    if len(shape) not in (2, 3) or (len(shape) == 3 and shape[2] not in (1, 3, 4)):
+        raise ValueError(f"image must be (H, W), (H, W, 3) or (H, W, 4), got shape {shape}")
+    return int(shape[1]), int(shape[0])
+
+
+# Players' outlines blur over a few pixels; evidence that close to a moving pixel is not trusted.
+MOVING_MARGIN_PX = 3
+
+
+def moving_mask_of(moving_mask: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """bool (H, W): pixels where something moved, grown by MOVING_MARGIN_PX."""
+    mask = np.asarray(moving_mask)
+    width, height = image_size
+    if mask.ndim == 3 and mask.shape[2] == 1:
+        mask = mask[:, :, 0]
+    if mask.shape != (height, width):
+        raise ValueError(
+            f"moving_mask must have the image's shape ({height}, {width}), got {mask.shape}"
+        )
+    grown = cv2.dilate(
+        (mask != 0).astype(np.uint8),
+        cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * MOVING_MARGIN_PX + 1,) * 2),
+    )
+    return grown > 0
+
+
+def line_evidence_of(image: np.ndarray, moving_mask: np.ndarray | None = None) -> LineEvidence:
+    """The evidence a calibration fits: ridges and steps of the picture's lines; an image that
+    already is a white-on-black line image (e.g. a rendered edge map) is taken as ridges as it
+    is."""
+    size = image_size_of(image)
+    ignore = moving_mask_of(moving_mask, size) if moving_mask is not None else None
+    if edges.is_edge_image(image):
+        return edge_image_evidence(edges.to_grey(image), ignore, as_ridges=True)
+    return line_evidence(image, ignore)

@@ -38,12 +38,14 @@ accepted negative failed at least one of these rules.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from app.calib.court import CourtModel
+from app.calib import camera, placement, refine, verify
+from app.calib.court import COURT_SPECS, CourtModel, court_model
 from app.calib.lines import EvidenceMaps
-from app.calib.search import VerifySamples, edge_hit_probability, edge_support
+from app.calib.verify import VerifySamples, edge_hit_probability, edge_support
 
 # tight tolerance of the verdict (px at 1920 px wide; never below 1.5 px)
 VERDICT_TOLERANCE_PX_AT_1920 = 3.0
@@ -58,7 +60,7 @@ MIN_SUPPORTED_EDGES = 10
 # Two shares of the edges in view must be supported (edges with at least SUPPORTED_SHARE of
 # their length on evidence):
 # - of all of them, at least 0.30. The court's edges show with probability ~0.5 on average
-#   (search.P_HIT_BY_EDGE), and a right camera's count of supported edges among the ~25 in view
+#   (verify.P_HIT_BY_EDGE), and a right camera's count of supported edges among the ~25 in view
 #   spreads like a binomial's (standard deviation ~0.1 of the share), so a right camera falls
 #   below 0.30 (two standard deviations under 0.5) rarely, and then because it is filmed through
 #   a glass back wall or on white walls whose junctions and corners hardly show. The rule was
@@ -210,7 +212,7 @@ def quality_figures(
     excess = (fraction - chance) / (1.0 - chance) if chance < 1.0 else 0.0
     absent = in_view & (share < ABSENT_SUPPORT)
     walls = ~_floor_edges(model)
-    # the edges a right camera finds nearly always (painted lines; search.P_HIT_BY_EDGE), apart
+    # the edges a right camera finds nearly always (painted lines; verify.P_HIT_BY_EDGE), apart
     # from junctions, glass and back-wall lines that often do not show
     reliable = in_view & (edge_hit_probability(model) >= RELIABLE_EDGE_P_HIT)
     return {
@@ -369,3 +371,128 @@ def verdict(figures: dict[str, float]) -> Verdict:
     if doubts:
         return Verdict("check", score, doubts, figures)
     return Verdict("good", score, ["the court's lines in view lie on the picture's lines"], figures)
+
+
+# ---------------------------------------------------------------------------------------------
+# the verdict on a final fit, its uncertainty, and other court specs
+
+# Another court spec is reported when the lines that tell it apart from the court's own lie on
+# the picture (support share) and the own spec's do not; lines closer than OTHER_SPEC_LINE_M
+# to each other do not tell specs apart.
+OTHER_SPEC_SHARE = 0.6
+OTHER_SPEC_OWN_SHARE = 0.3
+OTHER_SPEC_LINE_M = 0.025
+# Floor points whose expected error is reported: the T and the back corners.
+REPORTED_FLOOR_POINTS = ("T", "floor_back_left", "floor_back_right")
+
+
+def discriminating_edges(own: CourtModel, other: CourtModel) -> np.ndarray:
+    """bool (E,): edges of `other` that lie off the corresponding edge's line in `own` (by more
+    than OTHER_SPEC_LINE_M): what tells the two specs apart."""
+    out = np.zeros(len(other.edges), dtype=bool)
+    for e, name in enumerate(other.edge_names):
+        k = own.edge_names.index(name)
+        a, b = own.nodes[own.edges[k]]
+        direction = (b - a) / np.linalg.norm(b - a)
+        for p in other.nodes[other.edges[e]]:
+            off = (p - a) - ((p - a) @ direction) * direction
+            if np.linalg.norm(off) > OTHER_SPEC_LINE_M:
+                out[e] = True
+    return out
+
+
+def other_spec_fits_better(
+    fit: refine.Fit,
+    model: CourtModel,
+    samples_spacing_m: float,
+    maps: EvidenceMaps,
+    image_size: tuple[int, int],
+) -> tuple[str, str, bool] | None:
+    """(spec, why, whether floor lines tell them apart) of a court spec whose distinguishing
+    lines are clearly on the picture while the court's own spec's are clearly not, with a better
+    score overall; None if there is none."""
+    tolerance = verdict_tolerance_px(image_size[0])
+    own_verify = verify.verify_samples(model)
+    own_supported, own_visible, own_score = verify.edge_support(
+        fit.genome, own_verify, maps, tolerance
+    )
+    for other in COURT_SPECS:
+        if other == model.spec.name:
+            continue
+        other_model = court_model(other)
+        samples = refine.fit_samples(other_model, samples_spacing_m)
+        other_fit = refine.refine_coarse_to_fine(
+            fit.genome, samples, maps, refine.refine_taus(image_size[0]), fit.model
+        )
+        other_verify = verify.verify_samples(other_model)
+        supported, visible, score = verify.edge_support(
+            other_fit.genome, other_verify, maps, tolerance
+        )
+        telling = discriminating_edges(model, other_model)
+        own_telling = discriminating_edges(other_model, model)
+        other_share = supported[0, telling].sum() / max(visible[0, telling].sum(), 1e-9)
+        own_share = own_supported[0, own_telling].sum() / max(
+            own_visible[0, own_telling].sum(), 1e-9
+        )
+        seen = visible[0, telling].sum() >= MIN_EDGE_PX_AT_1920 * image_size[0] / 1920.0
+        if (
+            seen
+            and other_share >= OTHER_SPEC_SHARE
+            and own_share <= OTHER_SPEC_OWN_SHARE
+            and score[0] > own_score[0]
+        ):
+            why = (
+                f"the lines that tell the specs apart are {other_share:.0%} on the picture for a "
+                f"{COURT_SPECS[other].description} and {own_share:.0%} for the court's own spec"
+            )
+            floor = (other_model.nodes[other_model.edges[telling]][..., 2] == 0.0).all(axis=1)
+            return other, why, bool(floor.any())
+    return None
+
+
+def uncertainty_of(
+    fit: refine.Fit, samples: refine.FitSamples, model: CourtModel, image_width: int
+) -> dict[str, Any]:
+    covariance = refine.parameter_covariance(fit, samples, image_width)
+    std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    points = np.array([model.node(name)[:2] for name in REPORTED_FLOOR_POINTS])
+    floor_cm = refine.floor_error_cm(fit.genome, covariance, points)
+    names = {"T": "T", "floor_back_left": "back_left", "floor_back_right": "back_right"}
+    return {
+        "parameters": {
+            name: float(std[i]) for i, name in enumerate(camera.GENOME_NAMES) if std[i] > 0
+        },
+        "floor_error_cm": {
+            names[n]: (float(v) if np.isfinite(v) else None)
+            for n, v in zip(REPORTED_FLOOR_POINTS, floor_cm, strict=True)
+        },
+    }
+
+
+def judge_camera(
+    fit: refine.Fit,
+    samples: refine.FitSamples,
+    verification: verify.VerifySamples,
+    maps: EvidenceMaps,
+    model: CourtModel,
+    image_size: tuple[int, int],
+    search_info: dict[str, float],
+) -> tuple[Verdict, dict[str, Any]]:
+    """The verdict on a final fit (from `quality_figures` and the fit's uncertainty),
+    and that uncertainty."""
+    width = image_size[0]
+    uncertainty = uncertainty_of(fit, samples, model, width)
+    figures = quality_figures(fit.genome, verification, maps, model, width)
+    floor_t = uncertainty["floor_error_cm"]["T"]
+    figures["floor_error_t_cm"] = float("inf") if floor_t is None else float(floor_t)
+    figures["rms_px"] = fit.rms_px
+    figures["floor_share"] = float(placement.floor_shares(fit.genome, model, image_size)[0])
+    figures["camera_in_play_volume"] = float(placement.in_play_volume(fit.genome, model)[0])
+    figures["camera_behind_front_wall"] = float(placement.behind_front_wall(fit.genome, model)[0])
+    figures["pixel_aspect"] = float(fit.genome[camera.GENE["f_v"]] / fit.genome[camera.GENE["f_u"]])
+    offset = fit.genome[[camera.GENE["c_u"], camera.GENE["c_v"]]] - camera.picture_centre(
+        image_size
+    )
+    figures["principal_point_offset_share"] = float(np.hypot(*offset) / image_size[0])
+    figures.update({f"search_{k}": v for k, v in search_info.items()})
+    return verdict(figures), uncertainty
