@@ -50,8 +50,11 @@ from app.calib.segments import ImageLines, Undistortion
 VANISHING_MAX_LINES = 100
 VANISHING_MAX_ANGLE_RAD = np.deg2rad(1.5)
 VANISHING_ENDPOINT_PX = 1.5
-# Lines per group taken into quadruples.
+# Lines per group taken into quadruples; more in the second search (after a refusal), where a
+# court's lines can rank below other long lines of their direction (a tiled floor outside a
+# tripod's glass back wall, glass panes' frames): 16 lines make 2.7 times the quadruples of 10.
 QUADRUPLE_LINES_PER_GROUP = 10
+QUADRUPLE_LINES_PER_GROUP_SECOND_SEARCH = 16
 # Two groups can be the court's two floor directions only if their vanishing points allow it
 # (see `could_be_orthogonal`); the cosine margin allows for a principal point off centre.
 ORTHOGONAL_VP_MAX_COS = 0.25
@@ -1026,12 +1029,14 @@ def floor_hypotheses(
     image_size: tuple[int, int],
     undistortion: Undistortion | None,
     triads: list[tuple[VanishingGroup, VanishingGroup, VanishingGroup]] | None = None,
+    lines_per_group: int = QUADRUPLE_LINES_PER_GROUP,
 ) -> np.ndarray:
     """Plausible cameras (N, 15) from every pair of groups taken as (across, along) floor
-    lines (see the module doc); a third group that can be the vertical adds cameras with a free
-    principal point and with non-square pixels. The two floor directions of each of the
-    `triads` (`vanishing_triads`) are tried as well, for square pixels at the centre, where
-    they are not already a pair of `groups`."""
+    lines (see the module doc), the `lines_per_group` strongest of each group taken into
+    quadruples; a third group that can be the vertical adds cameras with a free principal point
+    and with non-square pixels. The two floor directions of each of the `triads`
+    (`vanishing_triads`) are tried as well, for square pixels at the centre, where they are not
+    already a pair of `groups`."""
     width, height = image_size
     across_values, along_values = floor_line_values(model)
     homog = lines.homogeneous()
@@ -1052,8 +1057,8 @@ def floor_hypotheses(
             and could_be_orthogonal(ga.point, gb.point, centre, width, OFF_CENTRE_VP_MAX_COS)
         ):
             return
-        a = homog[strongest(ga.lines, strength, QUADRUPLE_LINES_PER_GROUP)]
-        b = homog[strongest(gb.lines, strength, QUADRUPLE_LINES_PER_GROUP)]
+        a = homog[strongest(ga.lines, strength, lines_per_group)]
+        b = homog[strongest(gb.lines, strength, lines_per_group)]
         if len(a) < 2 or len(b) < 2:
             return
         for vertical in verticals or [np.zeros(3)]:
@@ -1643,7 +1648,8 @@ def search_cameras(
 ) -> SearchOutcome:
     """Hypotheses from the image's lines, typical placements and the start camera (and, in the
     `second_search` after a refusal, the line hypotheses under the anamorphic formats' pixel
-    aspects and from lines straightened with more lenses): ranked on
+    aspects, from lines straightened with more lenses and from more lines per vanishing group):
+    ranked on
     the evidence with a wide tolerance, the best distinct ones polished (a pinhole + k1 fit from
     a wide to a narrower truncation), ranked again with a tight tolerance. `trace(stage,
     cameras)` sees the cameras kept after each stage (for diagnosis)."""
@@ -1668,6 +1674,9 @@ def search_cameras(
     # estimate's lens ended with another's, their picture's corners 4-5 px off. A second lens
     # the chains agree on (`segments.undistortion_candidates`) is tried as it is.
     factors = STRONG_LENS_FACTORS_SECOND_SEARCH if second_search else STRONG_LENS_FACTORS
+    lines_per_group = (
+        QUADRUPLE_LINES_PER_GROUP_SECOND_SEARCH if second_search else QUADRUPLE_LINES_PER_GROUP
+    )
     lens_candidates = [undistortion.lam]
     if abs(undistortion.lam) > STRONG_LENS_LAMBDA:
         lens_candidates += [factor * undistortion.lam for factor in factors]
@@ -1679,7 +1688,19 @@ def search_cameras(
         image_lines = segments.merge_collinear(segments.segments_of(chains, lens, min_length))
         groups = vanishing_groups(image_lines)
         triads = vanishing_triads(image_lines, image_size)
-        line_parts.append(floor_hypotheses(image_lines, groups, model, image_size, lens, triads))
+        # the lines straightened with the plumb-line estimate only (the other lenses' lines are
+        # near-copies of them, and each is as costly)
+        line_parts.append(
+            floor_hypotheses(
+                image_lines,
+                groups,
+                model,
+                image_size,
+                lens,
+                triads,
+                lines_per_group if lam == undistortion.lam else QUADRUPLE_LINES_PER_GROUP,
+            )
+        )
         line_parts.append(front_wall_hypotheses(image_lines, groups, model, image_size, lens))
         n_lines, n_groups = max(n_lines, len(image_lines)), max(n_groups, len(groups))
     from_lines = np.concatenate(line_parts)
