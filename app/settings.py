@@ -65,7 +65,8 @@ class Settings(BaseSettings):
     # more uploads: one tenant cannot fill the queue (or the disk) for everyone.
     max_queued_jobs_per_tenant: int = Field(default=50, ge=1)
     queue_full_retry_after_s: int = Field(default=30, ge=1)
-    # ... and one with this many uploads in the last hour (whatever became of them) gets 429 with
+    # ... and one with this many uploads in the last hour (whatever became of them: one refused
+    # for its content counts too, a 429 does not; table upload_attempts) gets 429 with
     # Retry-After until the oldest of them is an hour old: a client stuck in a retry loop, or a
     # leaked key, cannot flood the workers and the disk.
     max_uploads_per_hour_per_tenant: int = Field(default=240, ge=1)

@@ -63,8 +63,11 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
 UPLOAD_RATE_WINDOW = timedelta(hours=1)
 
 
-def _refuse_if_over_limits(session: Session, tenant_id: str, settings: Settings) -> None:
-    """429 while the tenant already has its share of waiting jobs, or of uploads this hour."""
+def _refuse_if_over_limits(
+    session: Session, tenant_id: str, settings: Settings, counted_uploads: int = 0
+) -> None:
+    """429 while the tenant already has its share of waiting jobs, or of uploads this hour
+    (beyond `counted_uploads` of them: the uploads of this request already counted)."""
     if repo.count_queued_jobs(session, tenant_id) >= settings.max_queued_jobs_per_tenant:
         raise ApiError(
             429,
@@ -75,7 +78,7 @@ def _refuse_if_over_limits(session: Session, tenant_id: str, settings: Settings)
         )
     now = utcnow()
     count, oldest = repo.uploads_since(session, tenant_id, now - UPLOAD_RATE_WINDOW)
-    if count >= settings.max_uploads_per_hour_per_tenant:
+    if count - counted_uploads >= settings.max_uploads_per_hour_per_tenant:
         assert oldest is not None  # the window holds at least one upload
         retry_after_s = max(1, math.ceil((oldest + UPLOAD_RATE_WINDOW - now).total_seconds()))
         raise ApiError(
@@ -101,9 +104,13 @@ async def upload_calibration(
     settings = state.settings
 
     def owned_court_with_room_in_the_queue() -> Court:
-        with state.sessions() as session:
+        with state.sessions.begin() as session:
             court = repo.get_owned(session, Court, tenant_id, court_id)
             _refuse_if_over_limits(session, tenant_id, settings)
+            # counted whatever becomes of it (a refused one too): refused for its content in a
+            # loop, it would otherwise cost receiving and probing without limit
+            now = utcnow()
+            repo.record_upload_attempt(session, tenant_id, now, now - UPLOAD_RATE_WINDOW)
             return court
 
     # 404 or 429 before reading a byte of the body
@@ -121,7 +128,8 @@ async def upload_calibration(
 
         def commit_job() -> None:
             with state.sessions.begin() as session:
-                _refuse_if_over_limits(session, tenant_id, settings)  # others came in meanwhile
+                # others came in meanwhile (this upload is counted already)
+                _refuse_if_over_limits(session, tenant_id, settings, counted_uploads=1)
                 repo.new_job(
                     session,
                     job_id=job_id,

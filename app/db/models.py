@@ -197,6 +197,19 @@ class Job(Base):
     updated_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
+class UploadAttempt(Base):
+    """An upload the API began to receive (past the key, the court and the tenant's limits),
+    whatever became of it: the upload rate counts these, so that a client sending bad files in a
+    loop is held to the rate as well as one whose uploads become jobs."""
+
+    __tablename__ = "upload_attempts"
+    __table_args__ = (Index("ix_upload_attempts_tenant_time", "tenant_id", "received_at"),)
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True, default=new_id)
+    tenant_id: Mapped[str] = mapped_column(ForeignKey("tenants.id", ondelete="CASCADE"))
+    received_at: Mapped[datetime] = mapped_column()
+
+
 class JobAttempt(Base):
     """One claim of a job by a worker, from the claim to how it ended: the queue writes it in the
     same transaction as the claim and as whatever ends the attempt, so it is the record of who held

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from datetime import datetime
 from typing import Any, TypeVar
 
-from sqlalchemy import Connection, Engine, bindparam, func, select, update
+from sqlalchemy import Connection, Engine, bindparam, delete, func, select, update
 from sqlalchemy.exc import DBAPIError, StatementError
 from sqlalchemy.orm import Session
 
@@ -24,6 +24,7 @@ from app.db.models import (
     JobStage,
     JobStatus,
     Tenant,
+    UploadAttempt,
     utcnow,
 )
 
@@ -264,13 +265,27 @@ def count_queued_jobs(session: Session, tenant_id: str) -> int:
 
 
 def uploads_since(session: Session, tenant_id: str, since: datetime) -> tuple[int, datetime | None]:
-    """(how many jobs the tenant created since `since`, when the oldest of them was created)."""
+    """(how many uploads the tenant began since `since`, whatever became of them; when the oldest
+    of them began)."""
     count, oldest = session.execute(
-        select(func.count(Job.id), func.min(Job.created_at)).where(
-            Job.tenant_id == tenant_id, Job.created_at >= since
+        select(func.count(UploadAttempt.id), func.min(UploadAttempt.received_at)).where(
+            UploadAttempt.tenant_id == tenant_id, UploadAttempt.received_at >= since
         )
     ).one()
     return int(count or 0), oldest
+
+
+def record_upload_attempt(
+    session: Session, tenant_id: str, received_at: datetime, forget_before: datetime
+) -> None:
+    """Count an upload the API begins to receive, and forget the tenant's uploads from before
+    `forget_before` (the rate's window: older ones count for nothing, and the table stays small)."""
+    session.execute(
+        delete(UploadAttempt).where(
+            UploadAttempt.tenant_id == tenant_id, UploadAttempt.received_at < forget_before
+        )
+    )
+    session.add(UploadAttempt(tenant_id=tenant_id, received_at=received_at))
 
 
 def list_jobs(session: Session, tenant_id: str, court_id: str, limit: int) -> Sequence[Job]:

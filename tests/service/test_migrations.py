@@ -21,6 +21,7 @@ from app.db.models import (
     JobAttempt,
     JobStatus,
     Tenant,
+    UploadAttempt,
     new_id,
     utcnow,
 )
@@ -223,6 +224,45 @@ def test_tenants_last_claim_is_filled_from_their_jobs_postgres(tmp_path: Path) -
     with postgres_schema() as url:
         settings = make_settings(tmp_path / "data", database_url=url)
         _assert_tenants_last_claim_is_filled_from_their_jobs(settings)
+
+
+def _assert_upload_attempts_are_filled_from_the_jobs(settings: Settings) -> None:
+    """0007 -> 0008: every job is an upload its tenant made when the job was created (the rate's
+    hour does not start again at the upgrade)."""
+    config = alembic_config(settings)
+    engine = make_engine(settings)
+    try:
+        command.upgrade(config, "0007")
+        job_ids = _jobs_at_an_old_revision(engine, 2)
+        with engine.connect() as conn:
+            jobs = conn.execute(
+                select(Job.id, Job.tenant_id, Job.created_at).order_by(Job.id)
+            ).all()
+        command.upgrade(config, "0008")
+        with engine.connect() as conn:
+            uploads = conn.execute(
+                select(
+                    UploadAttempt.id, UploadAttempt.tenant_id, UploadAttempt.received_at
+                ).order_by(UploadAttempt.id)
+            ).all()
+        assert sorted(job_ids) == [row[0] for row in jobs]
+        assert [tuple(row) for row in uploads] == [tuple(row) for row in jobs]
+        command.downgrade(config, "0007")
+        with engine.connect() as conn:
+            assert "upload_attempts" not in inspect(conn).get_table_names()
+    finally:
+        engine.dispose()
+
+
+def test_upload_attempts_are_filled_from_the_jobs_sqlite(tmp_path: Path) -> None:
+    _assert_upload_attempts_are_filled_from_the_jobs(make_settings(tmp_path / "data"))
+
+
+@pytest.mark.postgres
+def test_upload_attempts_are_filled_from_the_jobs_postgres(tmp_path: Path) -> None:
+    with postgres_schema() as url:
+        settings = make_settings(tmp_path / "data", database_url=url)
+        _assert_upload_attempts_are_filled_from_the_jobs(settings)
 
 
 def test_models_differ_from_an_unmigrated_database(tmp_path: Path) -> None:

@@ -11,7 +11,7 @@ import sqlalchemy as sa
 
 from app.db import queue
 from app.db.migrate import upgrade_head
-from app.db.models import Job
+from app.db.models import UploadAttempt
 from app.db.session import make_engine
 from app.main import create_app
 from app.settings import Settings
@@ -88,13 +88,52 @@ def test_too_many_uploads_in_an_hour_are_429_with_retry_after_for_that_tenant_on
         assert upload(client, other, other_court, image).status_code == 202
 
         # an hour after the first upload there is room for one more
-        engine = make_engine(settings)
-        try:
-            with engine.begin() as conn:
-                first = conn.scalar(sa.select(Job.id).order_by(Job.created_at).limit(1))
-                an_hour_ago = datetime.now(UTC) - timedelta(hours=1, seconds=1)
-                conn.execute(sa.update(Job).where(Job.id == first).values(created_at=an_hour_ago))
-        finally:
-            engine.dispose()
+        _age_first_upload_past_the_hour(settings)
         assert upload(client, busy, court_id, image).status_code == 202
         assert_error(upload(client, busy, court_id, image), 429, "too_many_uploads")
+
+
+def _age_first_upload_past_the_hour(settings: Settings) -> None:
+    engine = make_engine(settings)
+    try:
+        with engine.begin() as conn:
+            first = conn.scalar(
+                sa.select(UploadAttempt.id).order_by(UploadAttempt.received_at).limit(1)
+            )
+            an_hour_ago = datetime.now(UTC) - timedelta(hours=1, seconds=1)
+            conn.execute(
+                sa.update(UploadAttempt)
+                .where(UploadAttempt.id == first)
+                .values(received_at=an_hour_ago)
+            )
+    finally:
+        engine.dispose()
+
+
+def test_uploads_refused_for_their_content_count_toward_the_upload_rate(
+    any_db_settings: Settings,
+) -> None:
+    """A client sending a file that is no picture in a loop is held to the rate too: every
+    upload the API began to receive counts, a 429 does not (a client retrying it would
+    otherwise never get out), and counted uploads older than the hour are forgotten."""
+    settings = any_db_settings.model_copy(update={"max_uploads_per_hour_per_tenant": 2})
+    busy = {"Authorization": f"Bearer {new_key(settings, 'busy')}"}
+    not_a_picture = files(b"<html>not a picture</html>" * 20, name="court.png")
+    with api_client(create_app(settings)) as client:
+        court_id = make_court(client, busy)
+        for _ in range(2):
+            assert upload(client, busy, court_id, not_a_picture).status_code == 415
+        for _ in range(3):
+            assert_error(
+                upload(client, busy, court_id, files(png_bytes(seed=3))), 429, "too_many_uploads"
+            )
+        assert jobs_in_db(settings) == [] and stored_job_dirs(settings) == []
+        _age_first_upload_past_the_hour(settings)
+        assert upload(client, busy, court_id, files(png_bytes(seed=3))).status_code == 202
+        engine = make_engine(settings)
+        try:
+            with engine.connect() as conn:
+                kept = conn.scalar(sa.select(sa.func.count()).select_from(UploadAttempt))
+        finally:
+            engine.dispose()
+        assert kept == 2  # the aged one is gone: the second bad upload and the accepted one
