@@ -140,16 +140,6 @@ def _floor_edges(model: CourtModel) -> np.ndarray:
     return (a[:, 2] == 0.0) & (b[:, 2] == 0.0)
 
 
-def _floor_edge_directions(model: CourtModel) -> tuple[np.ndarray, np.ndarray]:
-    """bool (E,) floor edges across the court (y constant) and along it (x constant)."""
-    a = model.nodes[model.edges[:, 0]]
-    b = model.nodes[model.edges[:, 1]]
-    floor = _floor_edges(model)
-    across = floor & (a[:, 1] == b[:, 1])
-    along = floor & (a[:, 0] == b[:, 0])
-    return across, along
-
-
 def _edge_directions(model: CourtModel) -> tuple[np.ndarray, np.ndarray]:
     """bool (E,) edges anywhere on the court that run across it (x only changes: floor lines
     across, the front and back walls' lines) and along it (x constant, y changes: floor lines
@@ -204,14 +194,14 @@ def quality_figures(
     in_view = visible >= min_edge
     share = np.where(visible > 0, supported / np.maximum(visible, 1e-9), 0.0)
     good_edge = in_view & (share >= SUPPORTED_SHARE)
-    across, along = _floor_edge_directions(model)
     any_across, any_along = _edge_directions(model)
+    floor = _floor_edges(model)
     total_visible = float(visible.sum())
     fraction = float(supported.sum()) / total_visible if total_visible > 0 else 0.0
     chance = chance_fraction(maps, tolerance)
     excess = (fraction - chance) / (1.0 - chance) if chance < 1.0 else 0.0
     absent = in_view & (share < ABSENT_SUPPORT)
-    walls = ~_floor_edges(model)
+    walls = ~floor
     # the edges a right camera finds nearly always (painted lines; verify.P_HIT_BY_EDGE), apart
     # from junctions, glass and back-wall lines that often do not show
     reliable = in_view & (edge_hit_probability(model) >= RELIABLE_EDGE_P_HIT)
@@ -226,8 +216,8 @@ def quality_figures(
         "wall_edges_supported": float((good_edge & walls).sum()),
         "upright_wall_edges_supported": float((good_edge & _upright_edges(model)).sum()),
         "log_likelihood_ratio_per_px": float(llr[0] / total_visible) if total_visible else 0.0,
-        "floor_across_supported": float((good_edge & across).sum()),
-        "floor_along_supported": float((good_edge & along).sum()),
+        "floor_across_supported": float((good_edge & any_across & floor).sum()),
+        "floor_along_supported": float((good_edge & any_along & floor).sum()),
         "across_supported": float((good_edge & any_across).sum()),
         "along_supported": float((good_edge & any_along).sum()),
         "support_fraction": fraction,
