@@ -78,8 +78,9 @@ def test_claims_oldest_first_and_only_once(engine) -> None:
     assert row.lease_expires_at is not None and row.lease_expires_at > utcnow()
 
 
-def test_concurrent_claims_never_share_a_job_and_each_opens_its_attempt(engine) -> None:
-    _, ids = add_jobs(engine, 12)
+def claims_of_workers_at_once(engine, finish: bool, n_workers: int = 4) -> list[tuple[str, str]]:
+    """(job id, worker) of every claim `n_workers` threads make, each claiming (and finishing, if
+    `finish`) until the queue has nothing for it; an exception in any thread fails the test."""
     claims: list[tuple[str, str]] = []
     lock = threading.Lock()
     errors: list[BaseException] = []
@@ -89,15 +90,23 @@ def test_concurrent_claims_never_share_a_job_and_each_opens_its_attempt(engine) 
             while (job := queue.claim(engine, name, lease_s=60)) is not None:
                 with lock:
                     claims.append((job.id, name))
+                if finish:
+                    queue.finish_success(engine, job, name, make_calibration(job), {})
         except BaseException as exc:  # surfaced below
             errors.append(exc)
 
-    threads = [threading.Thread(target=worker, args=(f"w{i}",)) for i in range(4)]
+    threads = [threading.Thread(target=worker, args=(f"w{i}",)) for i in range(n_workers)]
     for t in threads:
         t.start()
     for t in threads:
         t.join(60)
     assert errors == []
+    return claims
+
+
+def test_concurrent_claims_never_share_a_job_and_each_opens_its_attempt(engine) -> None:
+    _, ids = add_jobs(engine, 12)
+    claims = claims_of_workers_at_once(engine, finish=False)
     assert sorted(job_id for job_id, _ in claims) == sorted(ids)  # each exactly once
     with make_sessionmaker(engine)() as session:
         opened = [(a.job_id, a.worker_id) for a in session.scalars(select(JobAttempt))]
@@ -363,25 +372,7 @@ def test_workers_claiming_and_finishing_at_once_across_tenants_take_each_job_onc
     """Claims of one tenant queue on its row for its turn (PostgreSQL): no deadlock, no job taken
     twice, every job done."""
     job_ids = [job_id for _ in range(3) for job_id in add_jobs(engine, 6)[1]]
-    taken: list[str] = []
-    errors: list[BaseException] = []
-    lock = threading.Lock()
-
-    def worker(name: str) -> None:
-        try:
-            while (job := queue.claim(engine, name, lease_s=60)) is not None:
-                with lock:
-                    taken.append(job.id)
-                queue.finish_success(engine, job, name, make_calibration(job), {})
-        except BaseException as exc:  # surfaced below
-            errors.append(exc)
-
-    threads = [threading.Thread(target=worker, args=(f"w{i}",)) for i in range(4)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(60)
-    assert errors == []
+    taken = [job_id for job_id, _ in claims_of_workers_at_once(engine, finish=True)]
     assert sorted(taken) == sorted(job_ids)
     with make_sessionmaker(engine)() as session:
         statuses = session.scalars(select(Job.status)).all()
