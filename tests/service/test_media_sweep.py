@@ -7,6 +7,7 @@ import os
 import time
 from collections.abc import Callable
 from datetime import timedelta
+from pathlib import Path
 
 import pytest
 from sqlalchemy import update
@@ -57,10 +58,14 @@ def _orphan(settings: Settings, age_s: float) -> str:
     folder = media_store(settings).create_job_dir(orphan_id)
     part = folder / "part000.tmp"
     part.write_bytes(b"half an upload")
-    then = time.time() - age_s
-    for path in (part, folder):
-        os.utime(path, (then, then))
+    _last_written(age_s, part, folder)
     return orphan_id
+
+
+def _last_written(age_s: float, *paths: Path) -> None:
+    then = time.time() - age_s
+    for path in paths:
+        os.utime(path, (then, then))
 
 
 def _calibration_folder(settings: Settings, age_s: float, calibration_id: str | None = None) -> str:
@@ -70,9 +75,7 @@ def _calibration_folder(settings: Settings, age_s: float, calibration_id: str | 
     folder.mkdir(parents=True)
     image = folder / "overlay.png"
     image.write_bytes(b"png")
-    then = time.time() - age_s
-    for path in (image, folder):
-        os.utime(path, (then, then))
+    _last_written(age_s, image, folder)
     return calibration_id
 
 
