@@ -210,6 +210,16 @@ def test_another_sports_court_or_a_pattern_is_not_taken_for_a_squash_court(kind)
     assert info.value.reasons
 
 
+def test_a_badminton_court_whose_lines_a_squash_floor_fits_is_refused_for_its_service_boxes():
+    # bench.synthetic's negative badminton 7006: a squash camera lays its short line, floor
+    # lines and front wall onto the badminton court's lines and net and passed every other rule;
+    # nothing lies where its half-court line and service boxes go
+    negative = cases.make_negative("badminton", 7006)
+    with pytest.raises(pipeline.CourtNotFound) as info:
+        pipeline.calibrate(negative.image)
+    assert any("service boxes" in reason for reason in info.value.reasons), info.value.reasons
+
+
 @pytest.mark.slow
 def test_a_room_with_court_like_lines_is_refused():
     # bench.synthetic's negative room 1001: lines on floor and walls that a wrong squash camera

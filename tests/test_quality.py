@@ -1,10 +1,11 @@
 """The verdict (quality.py): figures of a camera on the line evidence, and the rules that turn
 them into good / check / not_a_court."""
 
+import cv2
 import numpy as np
 import pytest
 
-from app.calib import camera, lines, placement, quality, scene, search, verify
+from app.calib import camera, lines, placement, quality, render, scene, search, verify
 from app.calib.court import court_model
 
 SIZE = (1280, 720)
@@ -96,6 +97,7 @@ def test_typical_right_figures_are_good():
         ({"camera_behind_front_wall": 1.0}, "behind the front wall"),
         ({"pixel_aspect": 0.89, "wall_edges_supported": 2.0}, "non-square pixels"),
         ({"principal_point_offset_share": 0.2, "wall_edges_supported": 2.0}, "off-centre"),
+        ({"service_box_edges_in_view": 4.0, "service_box_support": 0.02}, "service boxes"),
     ],
 )
 def test_each_rule_refuses_with_its_reason(change, words):
@@ -173,3 +175,45 @@ def test_doubtful_figures_ask_for_a_check():
     judged = quality.verdict({**_typical_right(), "absent_fraction": 0.45})
     assert judged.label == "check"
     assert any("not seen" in reason for reason in judged.reasons)
+
+
+@pytest.mark.parametrize(
+    ("in_view", "support", "refused"),
+    [(4.0, 0.0, True), (2.0, 0.03, True), (1.0, 0.0, False), (4.0, 0.1, False), (0.0, 1.0, False)],
+)
+def test_the_service_boxes_speak_when_two_of_their_lines_are_in_view(in_view, support, refused):
+    """A zoomed view of the front half shows no box line, a view that hides the boxes behind
+    a player one: the rule says nothing then."""
+    figures = {
+        **_typical_right(),
+        "service_box_edges_in_view": in_view,
+        "service_box_support": support,
+    }
+    assert ("service_boxes" in quality.verdict(figures).refused_by) == refused
+
+
+def test_a_court_without_its_service_boxes_is_taken_for_another_sport(maps):
+    """The true camera on the court rendered with its half-court line and service boxes
+    painted over (another sport's floor has lines across and along where the squash court
+    has its short line and side lines, nothing where the boxes go): the other rules pass, this
+    one refuses."""
+    truth = _camera()
+    model = court_model()
+    photo = scene.render_court_image(truth, SIZE, rng=5)
+    boxes = render.draw_court(
+        np.zeros(photo.shape[:2], np.uint8),
+        truth,
+        model.subset(quality.SERVICE_BOX_EDGES),
+        255,
+        9,
+    )
+    painted_over = cv2.inpaint(photo, boxes, 5, cv2.INPAINT_TELEA)
+    with_boxes = _figures(truth, maps)
+    without = _figures(truth, lines.evidence_maps(lines.line_evidence(painted_over)))
+    assert with_boxes["service_box_edges_in_view"] >= 4
+    assert with_boxes["service_box_support"] > 0.6
+    assert without["service_box_edges_in_view"] == with_boxes["service_box_edges_in_view"]
+    assert without["service_box_support"] < quality.MIN_SERVICE_BOX_SUPPORT
+    judged = quality.verdict(without)
+    assert judged.refused_by == ("service_boxes",), judged.reasons
+    assert quality.verdict(with_boxes).label == "good"

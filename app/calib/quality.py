@@ -13,6 +13,9 @@ Figures (all from the final camera on the line evidence, `quality_figures`):
   evidence, times the share of directions that pass): support_excess = how far above chance;
 - absent_fraction: length of edges in view with almost no support (< ABSENT_SUPPORT), over all
   length in view: lines the camera predicts that are not there;
+- service_box_support: supported / visible length of the half-court line and the service
+  boxes' inner lines in view (`service_box_edges_in_view` of them): the floor lines only a
+  squash court has;
 - rms_px: RMS point-to-line residual of the matched samples;
 - floor_error_cm: expected floor error at the T (and the back corners) from the parameters'
   uncertainty: large when the visible lines do not pin the camera (one wall only, a few
@@ -26,13 +29,14 @@ reasoning below, never from the real images we develop on.
 What makes a squash court a squash court: lines on the walls (tin, service line, out lines) as
 well as on the floor. Other sports' floors (badminton, tennis, volleyball, futsal) carry grids
 of across and along lines which a wrong squash camera can lay a floor onto, but they have no
-wall lines, and they agree with at most 5-9 of the court's edges. A squash view that can be
-mapped shows a good part of the court's edges in view (typically 11-27 of them), among them
-at least one wall line, three floor lines across (front wall, short line, box lines, back wall)
-and two along (side walls, half-court line, box sides: two independent lines pin the scale
-across the court). On the synthetic benchmark (bench.synthetic, 140 views and 72 negatives,
-seeds 100+) no right camera had fewer than 11 edges supported, and every wrong camera and
-accepted negative failed at least one of these rules.
+wall lines, and they agree with at most 5-9 of the court's edges; where their lines meet a
+wrong squash camera's short line and side lines, nothing lies where its service boxes go. A
+squash view that can be mapped shows a good part of the court's edges in view (typically 11-27
+of them), among them at least one wall line, three floor lines across (front wall, short line,
+box lines, back wall) and two along (side walls, half-court line, box sides: two independent
+lines pin the scale across the court). On the synthetic benchmark (bench.synthetic, 140 views
+and 72 negatives, seeds 100+) no right camera had fewer than 11 edges supported, and every
+wrong camera and accepted negative failed at least one of these rules.
 """
 
 from __future__ import annotations
@@ -113,6 +117,26 @@ GOOD_ABSENT_FRACTION = 0.35
 # none: in the runs over seeds 7300-7415, 8 right cameras had one, all zoomed views, and 7 had
 # two), but asks for a look.
 GOOD_WALL_EDGES = 2
+# The floor lines only a squash court has: the half-court line and the service boxes' inner
+# lines. Other sports' floors have grids of lines across and along which a wrong squash camera
+# lays the court's long floor lines and the short line onto, but nothing where the boxes go
+# (bench.synthetic seeds 7000+: a badminton and a tennis court passed every other rule, with
+# 4-5 of these lines in view and none of their length on a line of the picture). The rule asks
+# for more than nothing: a right camera's box lines can show little (hidden by players, worn,
+# a few pixels wide far away; the least of the 262 right cameras of seeds 7000+ was 14 % of
+# their length), while what lies where nothing is painted is chance (the picture's share
+# within the tolerance of evidence running the way of a line: `chance_fraction`, 0.7-4.5 % on
+# 90 % of those pictures). With fewer than two of them in view (the boxes out of the picture, or one
+# beside a player) the rule says nothing.
+SERVICE_BOX_EDGES = (
+    "half_court",
+    "box_left_side",
+    "box_left_back",
+    "box_right_side",
+    "box_right_back",
+)
+MIN_SERVICE_BOX_EDGES_IN_VIEW = 2
+MIN_SERVICE_BOX_SUPPORT = 0.05
 # The rules (`verdict`'s names) that refuse a camera because the lines it finds do not pin it
 # down, not because what it finds might not be a squash court (no wall lines, support at chance,
 # where it stands, what it predicts and is absent): a sharper fit of the same court can pass them.
@@ -205,6 +229,7 @@ def quality_figures(
     # the edges a right camera finds nearly always (painted lines; verify.P_HIT_BY_EDGE), apart
     # from junctions, glass and back-wall lines that often do not show
     reliable = in_view & (edge_hit_probability(model) >= RELIABLE_EDGE_P_HIT)
+    boxes = in_view & np.isin(np.array(model.edge_names), SERVICE_BOX_EDGES)
     return {
         "supported_edges": float(good_edge.sum()),
         "edges_in_view": float(in_view.sum()),
@@ -224,6 +249,10 @@ def quality_figures(
         "chance_fraction": chance,
         "support_excess": float(excess),
         "absent_fraction": float(visible[absent].sum() / total_visible) if total_visible else 1.0,
+        "service_box_edges_in_view": float(boxes.sum()),
+        "service_box_support": float(supported[boxes].sum() / visible[boxes].sum())
+        if boxes.any()
+        else 1.0,
         "visible_px": total_visible,
         "log_likelihood_ratio": float(llr[0]),
         "tolerance_px": tolerance,
@@ -332,6 +361,16 @@ def verdict(figures: dict[str, float]) -> Verdict:
             "behind_front_wall",
             "the camera would stand behind the front wall, which is solid: it could not see the "
             "court from there",
+        )
+    if (
+        figures.get("service_box_edges_in_view", 0.0) >= MIN_SERVICE_BOX_EDGES_IN_VIEW
+        and figures.get("service_box_support", 1.0) < MIN_SERVICE_BOX_SUPPORT
+    ):
+        refuse(
+            "service_boxes",
+            "the half-court line and the service boxes are not where the camera puts them "
+            f"({figures['service_box_support']:.0%} of their length is on the picture's lines): "
+            "this may be another sport's court",
         )
     if figures["absent_fraction"] > MAX_ABSENT_FRACTION:
         refuse(
