@@ -22,8 +22,12 @@ def _camera() -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def maps() -> lines.EvidenceMaps:
-    photo = scene.render_court_image(_camera(), SIZE, rng=5)
+def photo() -> np.ndarray:
+    return scene.render_court_image(_camera(), SIZE, rng=5)
+
+
+@pytest.fixture(scope="module")
+def maps(photo) -> lines.EvidenceMaps:
     return lines.evidence_maps(lines.line_evidence(photo))
 
 
@@ -192,14 +196,13 @@ def test_the_service_boxes_speak_when_two_of_their_lines_are_in_view(in_view, su
     assert ("service_boxes" in quality.verdict(figures).refused_by) == refused
 
 
-def test_a_court_without_its_service_boxes_is_taken_for_another_sport(maps):
+def test_a_court_without_its_service_boxes_is_taken_for_another_sport(photo, maps):
     """The true camera on the court rendered with its half-court line and service boxes
     painted over (another sport's floor has lines across and along where the squash court
     has its short line and side lines, nothing where the boxes go): the other rules pass, this
     one refuses."""
     truth = _camera()
     model = court_model()
-    photo = scene.render_court_image(truth, SIZE, rng=5)
     boxes = render.draw_court(
         np.zeros(photo.shape[:2], np.uint8),
         truth,

@@ -126,8 +126,8 @@ GOOD_WALL_EDGES = 2
 # a few pixels wide far away; the least of the 262 right cameras of seeds 7000+ was 14 % of
 # their length), while what lies where nothing is painted is chance (the picture's share
 # within the tolerance of evidence running the way of a line: `chance_fraction`, 0.7-4.5 % on
-# 90 % of those pictures). With fewer than two of them in view (the boxes out of the picture, or one
-# beside a player) the rule says nothing.
+# 90 % of those pictures). With fewer than two of them in view (the boxes out of the picture,
+# or one beside a player) the rule says nothing.
 SERVICE_BOX_EDGES = (
     "half_court",
     "box_left_side",
