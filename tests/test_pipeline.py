@@ -362,3 +362,47 @@ def test_a_strong_lens_the_least_squares_plumb_line_misjudged_is_straightened() 
     )
     errors = floor_grid_errors_px(case.genome, found.candidates, case.spec, size)
     assert errors.min() <= NEAR_SHARE_OF_WIDTH * size[0]
+
+
+def test_a_club_view_through_a_strong_lens_has_its_lines_right_to_the_picture_edge() -> None:
+    """bench.synthetic's club 5007 (1920 x 1080, f = 787 px, k1 = -0.196, k2 = 0.020): accepted
+    before the lens starts with the floor 0.7 cm right and the lines 25 px RMS off (the side
+    wall's line at the picture's left edge 150 px off, the evidence there set aside as off the
+    court). Calibrated from no start, the lines come within the benchmark's 2 px."""
+    from bench.synthetic import FOUND_FLOOR_CM, FOUND_LINES_PX, camera_errors
+
+    case = cases.make_case("club", 5007)
+    size = (case.image.shape[1], case.image.shape[0])
+    result = pipeline.calibrate(case.image, spec=case.spec)
+    assert "k2" in result.camera_model
+    floor_cm, lines_px = camera_errors(case.genome, result.genome, case.spec, size)
+    assert floor_cm <= FOUND_FLOOR_CM and lines_px <= FOUND_LINES_PX, (floor_cm, lines_px)
+
+
+def test_a_lens_refit_that_fits_the_floor_lines_worse_does_not_replace_the_fit() -> None:
+    """bench.synthetic's club 7007 (a wide lens with decentring, a glass back wall with its
+    frame): the lens starts find a camera that costs 7 % less on all of the evidence by laying
+    the back wall's out line on the glass wall's frame, 4.5 px RMS off, and fits the floor's
+    lines worse; the fit from before them, within the benchmark's 2 px, stands."""
+    from bench.synthetic import FOUND_FLOOR_CM, FOUND_LINES_PX, camera_errors
+
+    case = cases.make_case("club", 7007)
+    size = (case.image.shape[1], case.image.shape[0])
+    result = pipeline.calibrate(case.image, spec=case.spec)
+    floor_cm, lines_px = camera_errors(case.genome, result.genome, case.spec, size)
+    assert floor_cm <= FOUND_FLOOR_CM and lines_px <= FOUND_LINES_PX, (floor_cm, lines_px)
+
+
+def test_the_lens_starts_do_not_turn_a_refused_camera_into_an_accepted_one() -> None:
+    """bench.synthetic's corner_side 7037: the first search's camera is refused; refitted from
+    the lens starts and judged on the evidence on its own court, it passed at 6.3 cm off, and
+    the second search, which finds the court, did not run. The lens starts only sharpen a
+    camera the verdict takes."""
+    from bench.synthetic import FOUND_FLOOR_CM, camera_errors
+
+    case = cases.make_case("corner_side", 7037)
+    size = (case.image.shape[1], case.image.shape[0])
+    result = pipeline.calibrate(case.image, spec=case.spec)
+    assert "square_pixel_pass" in result.timings_s  # the first search's camera was refused
+    floor_cm, _ = camera_errors(case.genome, result.genome, case.spec, size)
+    assert floor_cm <= FOUND_FLOOR_CM, floor_cm

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from app.calib import cases, lines, parallel, pipeline, refine, render, verify
+from app.calib import camera, cases, lines, parallel, pipeline, refine, render, verify
 from app.calib.court import court_model
 from bench.synthetic import FOUND_FLOOR_CM, FOUND_LINES_PX, camera_errors
 
@@ -235,3 +235,60 @@ def test_junctions_found_off_their_lines_are_given_offsets_instead_of_bending_th
         lost, samples, maps, taus[1:], refine.offset_edges(model), size[0]
     )
     assert kept is lost and not none.any()
+
+
+# bench.synthetic's club 5007 (1920 x 1080, f = 787 px, k1 = -0.196, k2 = 0.020): the camera the
+# pipeline accepted before the lens starts, floor 0.7 cm off, the side wall's line at the
+# picture's left edge 150 px off (the lines 25 px RMS)
+CLUB_5007_STUCK = np.array(
+    [792.4907, 792.4907, 959.5, 539.5, -1.0568, 3.084, 1.6225, 0.4591, 0.3337, 0.1336]
+    + [-0.2023, 0.0244, 0.0005, 0.0008, 0.0]
+)
+
+
+def test_a_strong_lens_stuck_at_the_picture_edge_is_freed_by_other_second_radial_terms() -> None:
+    """Lines far off the axis of a strong lens move tens of pixels with a small change of k2:
+    from the stuck camera, a refit from the wide truncation stays stuck, the best of the lens
+    starts puts the lines within the benchmark's 2 px, and never costs more than the refit from
+    the stuck camera's own k2 (one of its starts)."""
+    case = cases.make_case("club", 5007)
+    size, maps, samples, taus = _fit_inputs(case)
+    lens = refine.model_with(("k2", "tangential"))
+    stuck = refine.refine_coarse_to_fine(CLUB_5007_STUCK, samples, maps, taus[-1:], lens)
+    wide = refine.refit_from_wide(stuck, samples, maps, taus)
+    assert camera_errors(case.genome, wide.genome, case.spec, size)[1] > 2 * FOUND_LINES_PX
+    freed = refine.best_of_lens_starts(stuck, samples, maps, size)
+    floor_cm, lines_px = camera_errors(case.genome, freed.genome, case.spec, size)
+    assert floor_cm <= FOUND_FLOOR_CM and lines_px <= FOUND_LINES_PX, (floor_cm, lines_px)
+    schedule = (refine.WIDE_REFIT_FACTOR * max(taus), *taus)
+    own = refine.refine_coarse_to_fine(stuck.genome, samples, maps, schedule, lens)
+    assert freed.cost <= own.cost and freed.model == lens
+
+
+def test_the_lens_starts_step_k2_by_what_moves_the_picture_corner() -> None:
+    """A pinhole camera's corner reach is the corner's distance from the principal point over the
+    focal length; the step is the k2 whose r^5 term, beyond k1's and the focal length's share
+    (1/16 of it), moves the corner by the given shift."""
+    genome = CLUB_5007_STUCK.copy()
+    genome[refine.GENE["k1"] : refine.GENE["k3"] + 1] = 0.0
+    genome[refine.GENE["p1"] : refine.GENE["p2"] + 1] = 0.0
+    size = (1920, 1080)
+    reach = np.hypot(959.5, 539.5) / genome[0]
+    assert refine.corner_reach(genome, size) == pytest.approx(reach, rel=1e-6)
+    step = refine.k2_step(genome, size, 48.0)
+    assert step * reach**5 * genome[0] / 16.0 == pytest.approx(48.0)
+    # a barrel lens shows more of the world at the same corner: a larger reach, a smaller step
+    genome[refine.GENE["k1"]] = -0.05
+    assert refine.corner_reach(genome, size) > reach
+    assert refine.k2_step(genome, size, 48.0) < step
+    # one that turns back before the corner (k1 = -0.2 folds at r^2 = 1 / 0.6) reaches its fold
+    genome[refine.GENE["k1"]] = -0.2
+    assert refine.corner_reach(genome, size) == camera.lens_fold_radius(genome)
+    assert camera.lens_fold_radius(genome) == pytest.approx(np.sqrt(1.0 / 0.6), abs=0.05)
+
+
+def test_cost_of_a_camera_is_the_cost_its_fit_reports() -> None:
+    case = cases.make_case("club", 1000)
+    size, maps, samples, taus = _fit_inputs(case)
+    fit = refine.refine(case.genome, samples, maps, taus[-1])
+    assert refine.cost_of(fit.genome, samples, maps, taus[-1]) == pytest.approx(fit.cost)
