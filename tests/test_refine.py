@@ -287,8 +287,10 @@ def test_the_lens_starts_step_k2_by_what_moves_the_picture_corner() -> None:
     assert camera.lens_fold_radius(genome) == pytest.approx(np.sqrt(1.0 / 0.6), abs=0.05)
 
 
-def test_cost_of_a_camera_is_the_cost_its_fit_reports() -> None:
+def test_the_costs_per_sample_average_to_the_cost_its_fit_reports() -> None:
     case = cases.make_case("club", 1000)
     size, maps, samples, taus = _fit_inputs(case)
     fit = refine.refine(case.genome, samples, maps, taus[-1])
-    assert refine.cost_of(fit.genome, samples, maps, taus[-1]) == pytest.approx(fit.cost)
+    costs = refine.sample_costs(fit.genome, samples, maps, taus[-1])
+    assert costs.shape == (len(samples.points),)
+    assert costs.mean() == pytest.approx(fit.cost)

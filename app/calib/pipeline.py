@@ -199,15 +199,13 @@ def _with_lens_starts(
     refit = refine.with_chosen_model(scanned, samples, maps, width, refine.offset_edges(model))
     tau = refine.refine_taus(width)[-1]
     on_floor = samples.points[:, 2] == 0.0
-    costs = [
-        (
-            refine.cost_of(f.genome, samples, full_maps, tau),
-            refine.cost_of(f.genome, samples, full_maps, tau, on_floor),
-        )
-        for f in (fit, refit)
-    ]
-    (cost, floor_cost), (new_cost, new_floor_cost) = costs
-    if new_cost < cost and new_floor_cost <= floor_cost:
+    old_costs, new_costs = (
+        refine.sample_costs(f.genome, samples, full_maps, tau) for f in (fit, refit)
+    )
+    if (
+        new_costs.mean() < old_costs.mean()
+        and new_costs[on_floor].mean() <= old_costs[on_floor].mean()
+    ):
         return refit, ev, maps
     return None
 

@@ -328,19 +328,13 @@ def _summarise(
     )
 
 
-def cost_of(
-    genome: np.ndarray,
-    samples: FitSamples,
-    maps: EvidenceMaps,
-    tau_px: float,
-    among: np.ndarray | None = None,
-) -> float:
-    """A camera's cost (as `Fit.cost`) on `maps` at truncation `tau_px`, over the samples
-    `among` selects (bool (M,); all if None)."""
+def sample_costs(
+    genome: np.ndarray, samples: FitSamples, maps: EvidenceMaps, tau_px: float
+) -> np.ndarray:
+    """A camera's cost per sample (M,) on `maps` at truncation `tau_px`: their mean over all
+    samples is `Fit.cost`, over some of them the cost of those."""
     robust, _ = residuals(genome, samples, maps, tau_px)
-    if among is not None:
-        robust = robust[among]
-    return float(np.mean(robust**2) / tau_px**2)
+    return (robust / tau_px) ** 2
 
 
 def refine_coarse_to_fine(
@@ -424,14 +418,26 @@ def best_of_perturbed_starts(
     exactly."""
     rng = np.random.default_rng(seed)
     starts = list(perturbed_cameras(fit.genome, n_starts, rng))
-    trials = parallel.ordered_map(
-        lambda start: refine_coarse_to_fine(start, samples, maps, taus_px, fit.model), starts
+    # `fit` first: it stands against refits of equal cost
+    return min([fit, *refits_from(starts, samples, maps, taus_px, fit.model)], key=_cost)
+
+
+def refits_from(
+    starts: list[np.ndarray],
+    samples: FitSamples,
+    maps: EvidenceMaps,
+    taus_px: tuple[float, ...],
+    model: CameraModel,
+) -> list[Fit]:
+    """`refine_coarse_to_fine` from each of `starts`, side by side (the residuals release the
+    GIL), in their order."""
+    return parallel.ordered_map(
+        lambda start: refine_coarse_to_fine(start, samples, maps, taus_px, model), starts
     )
-    best = fit
-    for trial in trials:
-        if trial.cost < best.cost:
-            best = trial
-    return best
+
+
+def _cost(fit: Fit) -> float:
+    return fit.cost
 
 
 def effective_samples(fit: Fit, samples: FitSamples, image_width: int) -> float:
@@ -760,10 +766,7 @@ def best_of_lens_starts(
         start = fit.genome.copy()
         start[k2] += multiple * step
         starts.append(start)
-    trials = parallel.ordered_map(
-        lambda start: refine_coarse_to_fine(start, samples, maps, schedule, fit.model), starts
-    )
-    return min(trials, key=lambda trial: trial.cost)
+    return min(refits_from(starts, samples, maps, schedule, fit.model), key=_cost)
 
 
 def second_radial_term_could_show(genome: np.ndarray, image_size: tuple[int, int]) -> bool:
