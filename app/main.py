@@ -22,7 +22,7 @@ from app.api.security_headers import SecurityHeadersMiddleware
 from app.api.unread_body import CloseOnUnreadBodyMiddleware
 from app.db import repo
 from app.db.migrate import head_revision
-from app.db.session import make_engine, make_sessionmaker
+from app.db.session import make_engine, make_sessionmaker, write_engine
 from app.media.store import media_store
 from app.media.sweep import sweep_quietly
 from app.schemas import ErrorResponse, ProjectRequest
@@ -61,6 +61,7 @@ def create_app(settings: Settings | None = None, warm_up: bool = False) -> FastA
         settings=settings,
         engine=engine,
         sessions=sessions,
+        write_sessions=make_sessionmaker(write_engine(engine)),
         cameras=CameraCache(sessions, settings.camera_refresh_s, settings.camera_cache_size),
         keys=repo.KeyLookup(engine),
         head_revision=head_revision(settings),

@@ -104,7 +104,7 @@ async def upload_calibration(
     settings = state.settings
 
     def owned_court_with_room_in_the_queue() -> Court:
-        with state.sessions.begin() as session:
+        with state.write_sessions.begin() as session:
             court = repo.get_owned(session, Court, tenant_id, court_id)
             _refuse_if_over_limits(session, tenant_id, settings)
             # counted whatever becomes of it (a refused one too): refused for its content in a
@@ -127,7 +127,7 @@ async def upload_calibration(
         await run_in_threadpool(store.persist, target)
 
         def commit_job() -> None:
-            with state.sessions.begin() as session:
+            with state.write_sessions.begin() as session:
                 # others came in meanwhile (this upload is counted already)
                 _refuse_if_over_limits(session, tenant_id, settings, counted_uploads=1)
                 repo.new_job(

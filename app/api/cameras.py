@@ -12,7 +12,7 @@ import numpy as np
 from fastapi import APIRouter
 from fastapi.responses import Response
 
-from app.api.deps import SessionDep, TenantDep
+from app.api.deps import SessionDep, TenantDep, WriteSessionDep
 from app.api.errors import ApiError
 from app.api.routing import ApiRoute
 from app.api.serialize import calibration_out
@@ -32,7 +32,7 @@ MAX_IMPORT_IMAGE_PX = 16384
 
 @router.post("/courts/{court_id}/camera", response_model=CalibrationOut, responses=_ERRORS)
 def set_active_camera(
-    court_id: str, body: ActivateCamera, session: SessionDep, tenant_id: TenantDep
+    court_id: str, body: ActivateCamera, session: WriteSessionDep, tenant_id: TenantDep
 ) -> CalibrationOut:
     """Make one of the court's calibrations the active camera (what `/project` uses from now
     on, within the camera cache's refresh interval). The previous one stays in the history."""
@@ -57,7 +57,7 @@ def set_active_camera(
     responses=_ERRORS,
 )
 def import_camera(
-    court_id: str, body: CameraImport, session: SessionDep, tenant_id: TenantDep
+    court_id: str, body: CameraImport, session: WriteSessionDep, tenant_id: TenantDep
 ) -> CalibrationOut:
     """Store an existing camera (the OpenCV JSON form, court frame) as a calibration of the
     court. It has no picture and no fitness; by default it becomes the active camera."""

@@ -7,7 +7,7 @@ from typing import Annotated, TypeVar
 
 from fastapi import APIRouter, Query
 
-from app.api.deps import SessionDep, TenantDep
+from app.api.deps import SessionDep, TenantDep, WriteSessionDep
 from app.api.errors import ApiError
 from app.api.routing import ApiRoute
 from app.api.serialize import calibration_out, court_out
@@ -19,7 +19,7 @@ router = APIRouter(prefix="/courts", tags=["courts"], route_class=ApiRoute)
 
 
 @router.post("", status_code=201, response_model=CourtOut)
-def create_court(body: CourtCreate, session: SessionDep, tenant_id: TenantDep) -> CourtOut:
+def create_court(body: CourtCreate, session: WriteSessionDep, tenant_id: TenantDep) -> CourtOut:
     court = repo.create_court(session, tenant_id, body.name, body.spec)
     session.commit()
     return court_out(court)

@@ -24,6 +24,10 @@ class AppState:
     settings: Settings
     engine: Engine
     sessions: sessionmaker[Session]
+    # for transactions that write after reading: on SQLite they take the write lock at BEGIN,
+    # since a reading transaction cannot take it once another connection has committed since
+    # its snapshot (SQLite answers "database is locked" at once, whatever the busy timeout)
+    write_sessions: sessionmaker[Session]
     cameras: CameraCache
     keys: repo.KeyLookup
     head_revision: str | None
@@ -49,6 +53,14 @@ def get_session(state: StateDep) -> Iterator[Session]:
 
 
 SessionDep = Annotated[Session, Depends(get_session)]
+
+
+def get_write_session(state: StateDep) -> Iterator[Session]:
+    with state.write_sessions() as session:
+        yield session
+
+
+WriteSessionDep = Annotated[Session, Depends(get_write_session)]
 
 _UNAUTHORIZED_HEADERS = {"WWW-Authenticate": "Bearer"}
 

@@ -389,7 +389,8 @@ def test_a_connection_lost_at_the_commit_keeps_an_accepted_upload(
     from sqlalchemy.exc import OperationalError
 
     app = create_app(settings)
-    sessions = app.state.squashcal.sessions
+    # the sessions the upload stores its job through
+    sessions = app.state.squashcal.write_sessions
     pending = {"job": False}
 
     def connection_lost() -> OperationalError:
