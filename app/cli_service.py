@@ -195,10 +195,12 @@ def _supervise(supervisor: Supervisor, settings: Settings, banner: str | None) -
 
 def _keys(settings: Settings, args: argparse.Namespace) -> int:
     from app.db import repo
-    from app.db.session import make_engine, make_sessionmaker
+    from app.db.session import make_engine, make_sessionmaker, write_engine
 
     engine = make_engine(settings)
-    sessions = make_sessionmaker(engine)
+    # creating or revoking a key reads (the tenant, the key) and then writes: like the API's
+    # such transactions, it takes SQLite's write lock at BEGIN (see AppState.write_sessions)
+    sessions = make_sessionmaker(write_engine(engine))
     try:
         with sessions.begin() as session:
             if args.action == "create":
