@@ -60,6 +60,7 @@ def stoppable_postgres() -> Iterator[None]:
 
 
 @pytest.mark.postgres
+@pytest.mark.stops_postgres
 def test_the_api_answers_503_while_postgresql_is_down_and_recovers_by_itself(
     tmp_path: Path, stoppable_postgres: None
 ) -> None:
