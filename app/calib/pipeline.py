@@ -174,21 +174,23 @@ def _with_lens_starts(
     model: CourtModel,
     size: tuple[int, int],
 ) -> tuple[refine.Fit, lines.LineEvidence, lines.EvidenceMaps] | None:
-    """A final fit with a second radial term, in a picture wide enough for it to show (a strong
-    lens), tried again from other second radial terms (`refine.best_of_lens_starts`) on all of
-    the picture's evidence, then fitted to what of it lies on the court under that camera; with
-    that evidence, or None unless the new fit costs less on all of the evidence at the final
-    truncation, and no more on the floor's lines. All of it, because the evidence set aside as
-    off the court under the first camera includes the lines that camera put tens of pixels off
-    at the picture's edge. The floor's lines too, because at the picture's edge a lower cost
-    can be bought by laying wall lines on clutter: bench.synthetic club 7007's camera, 0.9 px
-    off, was replaced by one 4.5 px off (the back wall's out line on the glass wall's frame)
-    that cost 7 % less on all of the evidence and 8 % more on the floor's lines; where the
-    lens was what the first fit got wrong (club 5007, corner_side 5005) the floor's lines cost
-    less too."""
-    if "k2" not in fit.model.extensions or not refine.second_radial_term_could_show(
-        fit.genome, size
-    ):
+    """A final fit with a second radial term, fitted or held (the one the search's division-model
+    lens implies, 2 lambda^2 r^4, is kept where the model does not free k2), in a picture wide
+    enough for it to show (a strong lens), tried again from other second radial terms
+    (`refine.best_of_lens_starts`) on all of the picture's evidence, then fitted to what of it
+    lies on the court under that camera; with that evidence, or None unless the new fit costs
+    less on all of the evidence at the final truncation, and no more on the floor's lines.
+    All of it, because the evidence set aside as off the court under the first camera includes
+    the lines that camera put tens of pixels off at the picture's edge. The floor's lines too,
+    because at the picture's edge a lower cost can be bought by laying wall lines on clutter:
+    bench.synthetic club 7007's camera, 0.9 px off, was replaced by one 4.5 px off (the back
+    wall's out line on the glass wall's frame) that cost 7 % less on all of the evidence and
+    8 % more on the floor's lines; where the lens was what the first fit got wrong (club 5007,
+    corner_side 5005) the floor's lines cost less too."""
+    # a held k2 extrapolates to the picture's corners as a fitted one does: bench.synthetic
+    # wide_angle 7037's held 0.31 (the lens's own 0.04) put the corners' lines 100-350 px off
+    has_second_term = "k2" in fit.model.extensions or fit.genome[camera.GENE["k2"]] != 0.0
+    if not has_second_term or not refine.second_radial_term_could_show(fit.genome, size):
         return None
     width = size[0]
     scanned = refine.best_of_lens_starts(fit, samples, full_maps, size)
